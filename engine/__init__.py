@@ -1,0 +1,77 @@
+"""PHRT's Blender render engine: a thin router around ``engine/final.py``.
+
+Every callback turns an exception into ``report({'ERROR'})`` + ``error_set`` so
+the caller of ``bpy.ops.render.render()`` gets a ``RuntimeError`` with the
+message, instead of a silently black image.
+"""
+import bpy
+
+from . import final
+
+PASSES = (
+    # name, channels, channel ids, type
+    ("Normal", 3, "XYZ", "VECTOR"),
+    ("PHRT Selected", 1, "X", "VALUE"),
+    ("PHRT Candidate", 1, "X", "VALUE"),
+)
+
+
+class PHRTRenderEngine(bpy.types.RenderEngine):
+    bl_idname = "PHRT"
+    bl_label = "PHRT Hybrid"
+    bl_use_gpu_context = True
+    bl_use_shading_nodes_custom = False  # designers keep editing Principled BSDF materials
+    bl_use_preview = False
+    bl_use_postprocess = True
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.final = None
+
+    def render(self, depsgraph):
+        try:
+            if self.final is None:
+                self.final = final.FinalRender(self)
+            self.final.render(depsgraph)
+        except Exception as error:  # reported to the caller, never swallowed
+            message = f"PHRT: {error}"
+            final.log_exception(error)
+            self.report({"ERROR"}, message)
+            self.error_set(message)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")
+        for name, channels, chan_id, pass_type in PASSES:
+            self.register_pass(scene, renderlayer, name, channels, chan_id, pass_type)
+
+
+def _compat_panels():
+    """Blender's own panels that apply to PHRT (dimensions, output, camera, light, material...)."""
+    wanted_prefixes = ("RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_time_stretching",
+                       "RENDER_PT_stereoscopy", "RENDER_PT_output", "RENDER_PT_encoding",
+                       "RENDER_PT_post_processing", "RENDER_PT_stamp", "RENDER_PT_color_management",
+                       "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_context_camera", "DATA_PT_camera_dof",
+                       "DATA_PT_context_light", "DATA_PT_light", "DATA_PT_EEVEE_light", "DATA_PT_spot",
+                       "DATA_PT_area", "DATA_PT_context_mesh", "DATA_PT_normals", "DATA_PT_uv_texture",
+                       "DATA_PT_vertex_groups", "DATA_PT_shape_keys", "DATA_PT_customdata",
+                       "MATERIAL_PT_preview", "EEVEE_MATERIAL_PT_context_material", "EEVEE_MATERIAL_PT_surface",
+                       "MATERIAL_PT_viewport", "WORLD_PT_context_world", "EEVEE_WORLD_PT_surface",
+                       "VIEWLAYER_PT_layer_passes", "VIEWLAYER_PT_layer", "OBJECT_PT_visibility")
+    for name in wanted_prefixes:
+        panel = getattr(bpy.types, name, None)
+        if panel is not None and hasattr(panel, "COMPAT_ENGINES"):
+            yield panel
+
+
+def register():
+    bpy.utils.register_class(PHRTRenderEngine)
+    for panel in _compat_panels():
+        panel.COMPAT_ENGINES.add(PHRTRenderEngine.bl_idname)
+
+
+def unregister():
+    for panel in _compat_panels():
+        panel.COMPAT_ENGINES.discard(PHRTRenderEngine.bl_idname)
+    bpy.utils.unregister_class(PHRTRenderEngine)
+    final.release_caches()

@@ -1,0 +1,168 @@
+"""Final (F12 / animation / background) rendering of a PHRT frame.
+
+depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``raster``)
+-> selection, trace, composite (``phrt_addon.frame``) -> render result passes,
+and, when a replay session is active, the run logs.
+
+State that must survive between frames lives outside the engine instance, in a
+``ReplaySession`` (one per replay: frame renderer with its Embree scenes, cost
+model and last selection, plus the run log), so a replay made of separate
+``render.render()`` calls and an animation render behave the same.
+"""
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+import traceback
+
+import numpy as np
+
+from ..phrt_addon.frame import FrameRenderer
+from . import extract, raster
+
+_STANDALONE = {}  # scene name -> FrameRenderer when no replay session is active
+ACTIVE_SESSION = None
+
+
+def log_exception(error):
+    traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+
+
+def release_caches():
+    """Forget every cache (unregister, tests)."""
+    global ACTIVE_SESSION
+    for renderer in _STANDALONE.values():
+        renderer.close()
+    _STANDALONE.clear()
+    raster.GEOMETRY_CACHE.retain(set())
+    raster.SHADOW_MAP_CACHE.retain(set())
+    extract.MESH_CACHE._entries.clear()
+    extract.TEXTURE_CACHE.clear()
+    if ACTIVE_SESSION is not None:
+        ACTIVE_SESSION.renderer.close()
+    ACTIVE_SESSION = None
+
+
+class ReplaySession:
+    """What a replay carries from frame to frame. Activate with ``with session:``."""
+
+    def __init__(self, on_frame=None, settings_override=None, camera=None):
+        self.renderer = FrameRenderer()
+        self.on_frame = on_frame  # callback(result, snapshot) after each frame
+        self.settings_override = settings_override
+        self.camera = camera
+        self.last_result = None
+
+    def __enter__(self):
+        global ACTIVE_SESSION
+        ACTIVE_SESSION = self
+        return self
+
+    def __exit__(self, *exc):
+        global ACTIVE_SESSION
+        ACTIVE_SESSION = None
+        self.renderer.close()
+        return False
+
+
+# The last frame's decisions and problems, for the N panel and the viewport overlay.
+LAST_FRAME = {"rows": [], "problems": [], "stats": {}}
+
+
+def _shadow_key(light, snapshot, size):
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((light.kind, light.position, light.direction, light.spot_size, size)).encode())
+    for mesh in snapshot.meshes:
+        digest.update(mesh.geometry_key.encode())
+        digest.update(np.asarray(mesh.matrix_world, np.float64).tobytes())
+    return digest.hexdigest()
+
+
+class FinalRender:
+    def __init__(self, engine):
+        self.engine = engine
+
+    def render(self, depsgraph):
+        engine = self.engine
+        scene = depsgraph.scene_eval
+        session = ACTIVE_SESSION
+        start = time.perf_counter()
+        snapshot = extract.extract(depsgraph, camera_override=session.camera if session else None,
+                                   settings_override=session.settings_override if session else None)
+        for problem in snapshot.problems:
+            engine.report({"WARNING"}, f"PHRT: {problem}")
+        extract_ms = (time.perf_counter() - start) * 1000.0
+        if engine.test_break():
+            return
+        width, height = snapshot.camera.width, snapshot.camera.height
+        if session is not None:
+            renderer = session.renderer
+        else:
+            renderer = _STANDALONE.get(scene.name)
+            if renderer is None:
+                renderer = _STANDALONE[scene.name] = FrameRenderer()
+
+        engine.update_stats("PHRT", "Raster")
+        start = time.perf_counter()
+        shadow_maps = {}
+        with raster.RasterPass(snapshot) as raster_pass:
+            gbuffer = raster_pass.render_gbuffer()
+            if snapshot.meshes:
+                bounds = snapshot.bounds()
+                keys = set()
+                for index, light in enumerate(snapshot.lights):
+                    if not light.cast_shadows:
+                        continue
+                    key = _shadow_key(light, snapshot, snapshot.settings.shadow_map_size)
+                    keys.add(key)
+                    maps = raster.SHADOW_MAP_CACHE.get(key)
+                    if maps is None:
+                        maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
+                        raster.SHADOW_MAP_CACHE.put(key, maps)
+                    shadow_maps[index] = maps
+                raster.SHADOW_MAP_CACHE.retain(keys)
+            upload_ms = raster_pass.stats["upload_ms"]
+        raster_ms = (time.perf_counter() - start) * 1000.0
+        if engine.test_break():
+            return
+
+        engine.update_stats("PHRT", "Selection, tracing, compositing")
+        result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms)
+        result.stats["extract_ms"] = extract_ms
+        result.stats["gpu_upload_ms"] = upload_ms
+        self._write(result, width, height)
+        LAST_FRAME["rows"] = result.selection_rows
+        LAST_FRAME["problems"] = list(snapshot.problems)
+        LAST_FRAME["stats"] = dict(result.stats)
+        if session is not None:
+            session.last_result = result
+            if session.on_frame is not None:
+                session.on_frame(result, snapshot)
+        engine.update_stats("PHRT", f"{result.stats['total_ms']:.0f} ms, "
+                                    f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
+
+    def _write(self, result, width, height):
+        engine = self.engine
+        render_result = engine.begin_result(0, 0, width, height)
+        try:
+            layer = render_result.layers[0]
+            passes = result.passes
+            arrays = {
+                "Combined": passes.combined,
+                "Depth": passes.depth,
+                "Normal": passes.normal,
+                "PHRT Selected": passes.selected,
+                "PHRT Candidate": passes.candidate,
+            }
+            for name, array in arrays.items():
+                render_pass = layer.passes.find_by_name(name, "")
+                if render_pass is None:
+                    continue
+                flat = np.ascontiguousarray(np.nan_to_num(array), dtype=np.float32).ravel()
+                expected = width * height * render_pass.channels
+                if flat.size != expected:
+                    raise RuntimeError(f"pass {name}: {flat.size} values for {expected}")
+                render_pass.rect.foreach_set(flat)
+        finally:
+            engine.end_result(render_result)

@@ -1,0 +1,440 @@
+"""One PHRT frame after the G-buffer: selection, ray tracing, compositing.
+
+``FrameRenderer`` lives for a whole replay (one per engine instance or CLI run):
+it keeps the Embree scenes, the cost model and last frame's selection (the
+paper's S).  ``render()`` takes a snapshot, its G-buffer and the shadow maps
+and returns every pass plus the statistics and selection rows of the logs.
+
+Stages (CONTRACT.md section 4 timings):
+- raster_ms   (measured by the caller: GPU G-buffer + read-back + shadow maps) plus
+              the shadow-map lookups done here;
+- select_ms   element statistics from the element-id image and the heuristic;
+- trace_ms    Embree upload of changed geometry, shadow / reflection / refraction rays;
+- composite_ms deferred lighting with the final visibility and blending of the
+              traced and raster terms into the passes.
+
+Pay only for what is used: RASTER never touches the tracer (``embreex`` is not
+even imported), no lights means no shadow work, and no selected element means
+no Embree work at all.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import heuristic, shading
+from .cost_model import CostModel
+from .gbuffer import GBuffer, element_pixel_stats
+from .scene import SceneSnapshot, transform_points
+from .shadowmap import shadow_visibility
+
+# Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
+FOOTPRINT_STEP = 4
+
+
+@dataclass
+class FramePasses:
+    combined: np.ndarray  # (h,w,4) float32, linear, alpha 1 where covered or world
+    depth: np.ndarray  # (h,w) float32 view-axis distance; large where background
+    normal: np.ndarray  # (h,w,3) float32
+    selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
+    candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
+
+
+@dataclass
+class FrameResult:
+    passes: FramePasses
+    stats: dict
+    selection: object
+    selection_rows: list
+    problems: list = field(default_factory=list)
+
+
+def _timer():
+    return time.perf_counter()
+
+
+def _ms(start):
+    return (time.perf_counter() - start) * 1000.0
+
+
+class FrameRenderer:
+    """Renders the frames of one replay, carrying state from frame to frame."""
+
+    def __init__(self, threads: int | None = None):
+        self.threads = threads
+        self.cost_model = None
+        self.previous_selection = {}
+        self.trace_scene = None
+        self.frames_rendered = 0
+
+    def close(self):
+        if self.trace_scene is not None:
+            self.trace_scene.close()
+            self.trace_scene = None
+
+    # ------------------------------------------------------------------
+    def render(self, snapshot: SceneSnapshot, gbuffer: GBuffer, shadow_maps: dict, raster_ms: float) -> FrameResult:
+        settings = snapshot.settings
+        mode = settings.mode.upper()
+        height, width = gbuffer.height, gbuffer.width
+        materials = shading.MaterialTable(snapshot.materials)
+        if self.cost_model is None:
+            self.cost_model = CostModel(cost_mode=settings.cost_mode)
+        self.cost_model.cost_mode = settings.cost_mode
+
+        # -- raster shadows (shadow-map lookups) ------------------------------
+        start = _timer()
+        layers = self._layer_samples(gbuffer, snapshot, materials)
+        visibility = {}
+        for layer_name, samples in layers.items():
+            visibility[layer_name] = []
+            for light_index, light in enumerate(snapshot.lights):
+                maps = shadow_maps.get(light_index) if light.cast_shadows else None
+                if maps and len(samples["world"]):
+                    visibility[layer_name].append(shadow_visibility(maps, samples["world"], samples["surface"].normal))
+                else:
+                    visibility[layer_name].append(np.ones(len(samples["world"])))
+        raster_ms = raster_ms + _ms(start)
+
+        # -- selection --------------------------------------------------------
+        start = _timer()
+        n_elements = len(snapshot.elements)
+        front = gbuffer.front_element()
+        area_px, centre_ndc, distance = element_pixel_stats(front, n_elements, gbuffer.view_depth)
+        shadow_lights = [light for light in snapshot.lights if light.cast_shadows]
+        element_bounds = _element_bounds(snapshot)
+        footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px, mode) \
+            if shadow_lights and mode != "RASTER" else np.zeros(n_elements)
+        frame_elements = heuristic.FrameElements(
+            names=[e.name for e in snapshot.elements],
+            candidate=np.array([e.candidate for e in snapshot.elements], bool),
+            area_px=area_px, centre_ndc=centre_ndc, distance=distance,
+            priority=np.array([e.priority for e in snapshot.elements], float),
+            rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
+            shadows=np.array([e.shadows for e in snapshot.elements], bool),
+            reflections=np.array([e.reflections for e in snapshot.elements], bool),
+            refractions=np.array([e.refractions for e in snapshot.elements], bool),
+            rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint, settings.max_bounces),
+            frame_px=width * height,
+        )
+        selection = heuristic.select(
+            frame_elements, self.previous_selection,
+            heuristic.SelectionSettings(budget_ms=settings.budget_ms, selection_weight=settings.selection_weight,
+                                        max_area_fraction=settings.max_area_fraction, mode=mode,
+                                        cost_mode=settings.cost_mode),
+            self.cost_model)
+        selected = np.asarray(selection.selected, bool)
+        select_ms = _ms(start)
+
+        # -- ray tracing ------------------------------------------------------
+        start = _timer()
+        counters = _Counters()
+        reflection_radiance = {}
+        refraction_radiance = {}
+        element_rays = np.zeros(n_elements)
+        if np.any(selected):
+            self._trace(snapshot, gbuffer, layers, materials, selected, element_bounds, visibility,
+                        reflection_radiance, refraction_radiance, counters, element_rays)
+        trace_ms = _ms(start)
+
+        # -- compositing --------------------------------------------------------
+        start = _timer()
+        passes = self._composite(snapshot, gbuffer, layers, materials, visibility, reflection_radiance,
+                                 refraction_radiance, selected)
+        composite_ms = _ms(start)
+
+        total_ms = raster_ms + select_ms + trace_ms + composite_ms
+        self.cost_model.observe(heuristic.FrameTimes(
+            raster_ms=raster_ms, select_ms=select_ms, composite_ms=composite_ms, trace_ms=trace_ms,
+            effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
+                       "refractions": counters.refraction_ms, "upload": counters.upload_ms},
+            effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,
+                         "refractions": counters.refraction_rays},
+            element_rays=element_rays, selection=selection))
+        self.previous_selection = {name: bool(flag) for name, flag in zip(frame_elements.names, selected)}
+        self.frames_rendered += 1
+        stats = {
+            "frame": snapshot.frame, "mode": mode, "total_ms": total_ms, "raster_ms": raster_ms,
+            "select_ms": select_ms, "trace_ms": trace_ms, "composite_ms": composite_ms,
+            "budget_ms": settings.budget_ms, "predicted_trace_ms": float(selection.predicted_trace_ms),
+            "n_candidates": int(np.sum(frame_elements.candidate)),
+            "n_visible": int(np.sum(np.asarray(selection.visible, bool))),
+            "n_selected": int(np.sum(selected)), "rays": counters.rays,
+            "shadow_rays": counters.shadow_rays, "reflection_rays": counters.reflection_rays,
+            "refraction_rays": counters.refraction_rays, "upload_ms": counters.upload_ms,
+            "time_left_ms": float(selection.time_left_ms), "triangles": snapshot.n_triangles,
+        }
+        return FrameResult(passes=passes, stats=stats, selection=selection,
+                           selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
+
+    # ------------------------------------------------------------------
+    @staticmethod
+    def _layer_samples(gbuffer, snapshot, materials):
+        """Per covered pixel of each layer: flat index, world point, surface samples."""
+        camera = snapshot.camera
+        origins, directions = camera.pixel_rays()
+        layers = {}
+        for name, layer in (("opaque", gbuffer.opaque), ("transparent", gbuffer.transparent)):
+            flat = np.flatnonzero(layer.covered.ravel())
+            position = layer.position.reshape(-1, 3)[flat].astype(np.float64)
+            world = position + gbuffer.origin
+            view_dirs = directions.reshape(-1, 3)[flat]
+            material = np.clip(layer.material.ravel()[flat], 0, len(materials.ior) - 1)
+            normal = shading.normalize(layer.normal.reshape(-1, 3)[flat].astype(np.float64))
+            # A normal facing away from the viewer (interpolation at silhouettes) is flipped.
+            back = np.sum(normal * view_dirs, axis=1) > 0
+            normal[back] *= -1.0
+            surface = shading.SurfaceSamples(
+                position=position, normal=normal, view=-view_dirs,
+                albedo=layer.albedo.reshape(-1, 3)[flat].astype(np.float64),
+                metallic=layer.metallic.ravel()[flat].astype(np.float64),
+                roughness=layer.roughness.ravel()[flat].astype(np.float64),
+                transmission=materials.transmission[material], ior=materials.ior[material],
+                emission=materials.emission[material])
+            layers[name] = {"flat": flat, "world": world, "surface": surface, "material": material,
+                            "element": layer.element.ravel()[flat], "directions": view_dirs}
+        return layers
+
+    def _shadow_footprints(self, layers, snapshot, element_bounds, area_px, mode):
+        """Estimated shadow-ray count per element (pixels it can shadow, summed over lights),
+        from a 1/FOOTPRINT_STEP^2 sub-sample of the opaque layer."""
+        n = len(snapshot.elements)
+        footprint = np.zeros(n)
+        samples = layers["opaque"]
+        if len(samples["world"]) == 0:
+            return footprint
+        points = samples["world"][::FOOTPRINT_STEP * FOOTPRINT_STEP]
+        scale = FOOTPRINT_STEP * FOOTPRINT_STEP
+        for index, element in enumerate(snapshot.elements):
+            if not (element.candidate and element.shadows) or area_px[index] == 0 or element_bounds[index] is None:
+                continue
+            for light in snapshot.lights:
+                if light.cast_shadows:
+                    footprint[index] += scale * np.count_nonzero(shadow_region(light, element_bounds[index], points))
+        return footprint
+
+    # ------------------------------------------------------------------
+    def _trace(self, snapshot, gbuffer, layers, materials, selected, element_bounds, visibility,
+               reflection_radiance, refraction_radiance, counters, element_rays):
+        from .tracer import RadianceTracer, TraceScene, ray_epsilon, reflection_blend
+
+        start = _timer()
+        if self.trace_scene is None:
+            self.trace_scene = TraceScene(self.threads)
+        transparent_materials = np.array([m.is_transparent for m in snapshot.materials], bool)
+        counters.upload_ms = self.trace_scene.update(snapshot, transparent_materials)
+        scene = self.trace_scene
+        textures = {index: m.texture for index, m in enumerate(snapshot.materials) if m.texture is not None}
+        tracer = RadianceTracer(scene, snapshot, materials, textures)
+        elements = snapshot.elements
+
+        # Shadows: for each light, the pixels a selected shadow caster can shadow get traced visibility.
+        start = _timer()
+        casters = [i for i in np.flatnonzero(selected) if elements[i].shadows and element_bounds[i] is not None]
+        for layer_name, samples in layers.items():
+            if not casters or len(samples["world"]) == 0:
+                continue
+            surface = samples["surface"]
+            points_trace = scene.to_trace(samples["world"])
+            eps = ray_epsilon(points_trace, scene.extent)
+            for light_index, light in enumerate(snapshot.lights):
+                if not light.cast_shadows:
+                    continue
+                region = np.zeros(len(points_trace), bool)
+                for caster in casters:
+                    caster_region = shadow_region(light, element_bounds[caster], samples["world"])
+                    element_rays[caster] += np.count_nonzero(caster_region)
+                    region |= caster_region
+                direction, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
+                region &= np.sum(surface.normal * direction, axis=1) > 0
+                idx = np.flatnonzero(region)
+                if len(idx) == 0:
+                    continue
+                origins = points_trace[idx] + surface.normal[idx] * eps[idx, None]
+                blocked = scene.occluded(origins, direction[idx], distance[idx] - 2 * eps[idx])
+                visibility[layer_name][light_index][idx] = np.where(blocked, 0.0, 1.0)
+                counters.shadow_rays += len(idx)
+        counters.shadow_ms = _ms(start)
+
+        # Reflections on selected elements' pixels (mirror direction, blended by roughness).
+        start = _timer()
+        rays_before = tracer.rays + tracer.shadow_rays
+        for layer_name, samples in layers.items():
+            surface = samples["surface"]
+            element_of = samples["element"]
+            wanted = np.zeros(len(element_of), bool)
+            for index in np.flatnonzero(selected):
+                if elements[index].reflections:
+                    wanted |= element_of == index
+            wanted &= reflection_blend(surface.roughness) > 0
+            idx = np.flatnonzero(wanted)
+            if len(idx) == 0:
+                continue
+            points_trace = scene.to_trace(samples["world"][idx])
+            eps = ray_epsilon(points_trace, scene.extent)
+            direction = shading.reflect(samples["directions"][idx], surface.normal[idx])
+            radiance = tracer.radiance(points_trace + surface.normal[idx] * eps[:, None], direction, 1)
+            reflection_radiance[layer_name] = (idx, radiance)
+            np.add.at(element_rays, element_of[idx], 1)
+        counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
+        counters.reflection_ms = _ms(start)
+
+        # Refractions through selected transparent elements (transparent layer only).
+        start = _timer()
+        rays_before = tracer.rays + tracer.shadow_rays
+        samples = layers["transparent"]
+        if len(samples["world"]):
+            surface = samples["surface"]
+            element_of = samples["element"]
+            wanted = np.zeros(len(element_of), bool)
+            for index in np.flatnonzero(selected):
+                if elements[index].refractions:
+                    wanted |= element_of == index
+            wanted &= surface.transmission > 1e-3
+            idx = np.flatnonzero(wanted)
+            if len(idx):
+                points_trace = scene.to_trace(samples["world"][idx])
+                eps = ray_epsilon(points_trace, scene.extent)
+                direction, _ = shading.refract(samples["directions"][idx], surface.normal[idx], 1.0 / surface.ior[idx])
+                radiance = tracer.radiance(points_trace - surface.normal[idx] * eps[:, None], direction, 1)
+                refraction_radiance["transparent"] = (idx, radiance)
+                np.add.at(element_rays, element_of[idx], 1)
+        counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
+        counters.refraction_ms = _ms(start)
+
+    # ------------------------------------------------------------------
+    def _composite(self, snapshot, gbuffer, layers, materials, visibility, reflection_radiance,
+                   refraction_radiance, selected):
+        height, width = gbuffer.height, gbuffer.width
+        world = np.asarray(snapshot.world_color, dtype=np.float64)
+        shaded = {}
+        for layer_name, samples in layers.items():
+            surface = samples["surface"]
+            color = surface.emission.copy()
+            for light_index, light in enumerate(snapshot.lights):
+                direction, _, irradiance = shading.light_incidence(light, samples["world"], np.zeros(3))
+                color += shading.brdf_cosine(surface, direction) * irradiance * visibility[layer_name][light_index][:, None]
+            diffuse_ambient, fresnel = shading.ambient(surface, world)
+            color += diffuse_ambient
+            transmissive = surface.transmission * (1.0 - surface.metallic)
+            reflected = np.broadcast_to(world, color.shape).copy()
+            if layer_name in reflection_radiance:
+                from .tracer import reflection_blend
+                idx, radiance = reflection_radiance[layer_name]
+                blend = reflection_blend(surface.roughness[idx])[:, None]
+                reflected[idx] = blend * radiance + (1.0 - blend) * world
+            cos_v = np.clip(np.sum(surface.normal * surface.view, axis=1), 0.0, 1.0)
+            fresnel_t = shading.fresnel_dielectric(cos_v, surface.ior)
+            reflect_weight = fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
+            color += reflect_weight * reflected
+            shaded[layer_name] = (color, transmissive, fresnel_t)
+
+        image = np.broadcast_to(world, (height * width, 3)).copy()
+        opaque = layers["opaque"]
+        image[opaque["flat"]] = shaded["opaque"][0]
+        transparent = layers["transparent"]
+        if len(transparent["flat"]):
+            color, transmissive, fresnel_t = shaded["transparent"]
+            surface = transparent["surface"]
+            behind = image[transparent["flat"]].copy()  # raster: straight through, no bending
+            if "transparent" in refraction_radiance:
+                idx, radiance = refraction_radiance["transparent"]
+                behind[idx] = radiance
+            tint = surface.albedo
+            transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * tint * behind
+            alpha = materials.alpha[transparent["material"]][:, None]
+            surface_color = color + transmitted
+            image[transparent["flat"]] = alpha * surface_color + (1.0 - alpha) * behind
+        image = shading.finite(image).reshape(height, width, 3)
+
+        combined = np.ones((height, width, 4), np.float32)
+        combined[..., :3] = image
+        front = gbuffer.front_element()
+        candidate_flags = np.array([e.candidate for e in snapshot.elements] + [False], bool)
+        selected_flags = np.r_[np.asarray(selected, bool), False]
+        depth = np.where(np.isfinite(gbuffer.view_depth), gbuffer.view_depth, 1e10).astype(np.float32)
+        return FramePasses(
+            combined=combined,
+            depth=depth,
+            normal=np.nan_to_num(gbuffer.front_normal()).astype(np.float32),
+            selected=selected_flags[front].astype(np.float32),
+            candidate=candidate_flags[front].astype(np.float32),
+        )
+
+
+@dataclass
+class _Counters:
+    shadow_rays: int = 0
+    reflection_rays: int = 0
+    refraction_rays: int = 0
+    shadow_ms: float = 0.0
+    reflection_ms: float = 0.0
+    refraction_ms: float = 0.0
+    upload_ms: float = 0.0
+
+    @property
+    def rays(self):
+        return self.shadow_rays + self.reflection_rays + self.refraction_rays
+
+
+def _element_bounds(snapshot):
+    """World-space (min, max) of each element's triangles (None when it has none)."""
+    lows = [None] * len(snapshot.elements)
+    highs = [None] * len(snapshot.elements)
+    for mesh in snapshot.meshes:
+        if mesh.n_triangles == 0 or not np.any(mesh.tri_element >= 0):
+            continue
+        world = transform_points(mesh.matrix_world, mesh.positions)
+        for element in np.unique(mesh.tri_element[mesh.tri_element >= 0]):
+            corners = world[mesh.triangles[mesh.tri_element == element].ravel()]
+            low, high = corners.min(axis=0), corners.max(axis=0)
+            if lows[element] is None:
+                lows[element], highs[element] = low, high
+            else:
+                lows[element] = np.minimum(lows[element], low)
+                highs[element] = np.maximum(highs[element], high)
+    return [None if low is None else (low, high) for low, high in zip(lows, highs)]
+
+
+def shadow_region(light, bounds, points) -> np.ndarray:
+    """Points (world, (N,3)) whose segment to ``light`` may pass through the box ``bounds``:
+    the pixels an element can shadow.  Conservative (a bounding sphere or a light-space box)."""
+    low, high = bounds
+    centre = (low + high) / 2.0
+    radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+    if light.kind == "SUN":
+        direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+        relative = points - centre
+        along = relative @ direction  # > 0: downstream of the caster
+        lateral = relative - along[:, None] * direction
+        return (along > -radius) & (np.einsum("ij,ij->i", lateral, lateral) <= radius * radius)
+    light_position = np.asarray(light.position, dtype=np.float64)
+    to_centre = centre - light_position
+    centre_distance = float(np.linalg.norm(to_centre))
+    if centre_distance <= radius:
+        return np.ones(len(points), bool)  # the light is inside the caster's bounds
+    axis = to_centre / centre_distance
+    to_point = points - light_position
+    point_distance = np.linalg.norm(to_point, axis=1)
+    cos_point = (to_point @ axis) / np.maximum(point_distance, 1e-30)
+    cos_cone = np.sqrt(max(1.0 - (radius / centre_distance) ** 2, 0.0))
+    return (cos_point >= cos_cone) & (point_distance > centre_distance - radius)
+
+
+def _rays_per_pixel(snapshot, area_px, footprint, max_bounces):
+    """Rays one pixel of each element costs with its effects (input of the measured cost model)."""
+    rays = np.zeros(len(snapshot.elements))
+    safe_area = np.maximum(area_px, 1)
+    for index, element in enumerate(snapshot.elements):
+        per_pixel = 0.0
+        if element.shadows:
+            per_pixel += footprint[index] / safe_area[index]
+        if element.reflections:
+            per_pixel += 1.0 + len(snapshot.lights)  # the reflection ray and its hit's shadow rays
+        if element.refractions:
+            per_pixel += 2.0 + len(snapshot.lights)  # in, out, and the hit's shadow rays
+        rays[index] = per_pixel
+    return rays

@@ -1,0 +1,586 @@
+"""Selection heuristic of the paper (sections IV and V): which elements are ray traced.
+
+Plain Python + numpy (no ``bpy``), one frame at a time:
+
+1. the paper's terms of every element (equations 1-3): area A, centre closeness
+   P, distance D, visibility V, cost C and relevance R, computed on whole arrays
+   that the engine fills from its scene snapshot and its G-buffer
+   (:class:`FrameElements`, :func:`element_terms`);
+2. the selection graph of section V.B (:class:`SelectionGraph`): one node per
+   competing element with its predicted cost in milliseconds and its relevance,
+   the cost-ordered list and the relevance order;
+3. node selection of section V.C within the time left T (:func:`select`), with
+   the graph rebuilt every frame (V.D) and one explainable row per element
+   (:meth:`SelectionResult.rows`, the columns of CONTRACT.md section 4).
+
+An element is an object tagged ``candidate``, or the faces of one material slot
+whose material is tagged.  Non-candidates are passed too: they get rows (reason
+``not_candidate``) and are never selected.
+
+Decisions where the paper is vague
+----------------------------------
+Visible
+    An element is visible when it has at least one pixel in the G-buffer's
+    element-id target (``area_px > 0``).  Hidden and off-screen elements alike
+    are ``not_visible``.
+A (area)
+    ``area_px / frame_px``: the exact pixel count, in [0, 1].
+P (centre closeness)
+    ``1 - max(|x|, |y|)`` of the element's pixel centroid in normalised device
+    coordinates (-1..1): 1 at the centre of the view, 0 on the border of the
+    frame and beyond, with rectangular level lines that follow the frame's
+    shape (a round distance would reach 0 at the middle of the edges but not in
+    the corners).  0 for an invisible element or a non-finite centroid.
+D (distance)
+    The camera-space depth of the element, clamped to [near_clip, 1e12]: the
+    near-plane clamp.  An element touching or behind the camera (depth <= 0),
+    or a depth of 1e-9, counts as lying on the near plane, which is where its
+    visible pixels are at the closest; an unknown (NaN) depth too.  The engine
+    passes the camera's ``clip_start`` as ``near_clip`` (Blender's default,
+    0.1, otherwise).  D is therefore never zero or negative in a division.
+V (visibility), normalised
+    ``V = (A * P / D) / visibility_scale`` where ``visibility_scale`` is the
+    largest ``A * P / D`` among the frame's competing elements (visible
+    candidates within the area limit), so the most visible of them has V = 1.
+    Raw A*P/D is in 1/scene-units and spans orders of magnitude with the scene
+    scale, while equation (3) adds the selection weight I to V: only a V on a
+    known scale gives I a meaning.  With the default I = 0.5, an element
+    selected last frame keeps its place against an unselected rival of equal
+    priority K unless the rival is more visible by half of the frame's top
+    visibility - strong hysteresis, as the paper wants ("no element repeatedly
+    changed from raster to ray tracing") - while a newly central, large element
+    still displaces weakly visible ones.  The normalisation only rescales V
+    within a frame, so orders by V are the paper's; C = V * Q and R use this V,
+    and the selection log shows it, so every row can be recomputed from its own
+    columns.  Non-competing elements use the same scale (their V may exceed 1).
+K (priority) = 0
+    The designer's "never worth tracing" (the property's description): such an
+    element is treated as not a candidate (reason ``not_candidate``), in every
+    mode.  K is clamped to [0, 1e15].
+Modes
+    ``HYBRID`` applies the budget and the area limit.  ``RAYTRACE`` selects
+    every visible candidate (K > 0) with no budget and no area limit; T is still
+    reported.  ``RASTER`` is ray tracing with no time at all: T = 0 and nothing
+    is selected, not even an element predicted to cost 0 ms; visible candidates
+    within the area limit get ``over_budget`` (no time for ray tracing), those
+    over it ``over_area``.
+Node selection (V.C)
+    Nodes are ordered by relevance R, highest first; ties go to the cheaper
+    node, then to the lower element index (the engine keeps a stable element
+    order), so equal input gives equal output.  Phase 1 takes the first
+    ``n_parallel`` nodes in that order whose predicted cost fits the time still
+    left; phase 2 goes on down the order taking every node that still fits.  At
+    each step this is the paper's "most relevant node whose cost C is small
+    enough", because a node skipped earlier could not fit a larger remainder.
+    The phases select the same set as a single greedy pass; ``phase`` records
+    the batch so the engine can trace the N most relevant nodes first (one per
+    worker).  A node predicted at 0 ms always fits.  The predicted cost of the
+    selection never exceeds T: both are summed in the same order.
+Relevance edges
+    The paper links every node to all nodes of higher relevance: O(n^2) edges.
+    Their information is the relevance order, which is all selection needs;
+    :meth:`SelectionGraph.relevance_edges` materialises them for debugging only.
+Hysteresis margin
+    Used by :func:`hysteresis_margin` and the property tests: for a competing
+    element, how much its V can change (with everything else, its cost and the
+    frame's visibility scale unchanged) before its relevance crosses that of a
+    competing element in the other state.  Greedy selection keeps the element's
+    state within that margin: a selected element sinking past selected ones only
+    still fits, an unselected one rising past unselected ones still does not.
+    At a steady selection, a selected element's margin against an unselected
+    rival of equal K is ``I + (V_element - V_rival)``: the selection weight I
+    widens it by exactly I.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from . import defaults
+from .cost_model import MAX_PREDICTED_MS, CostModel, normalise_cost_mode
+
+# Contract columns of selection.csv (CONTRACT.md section 4), in order.
+SELECTION_COLUMNS = ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S", "R", "selected", "reason")
+REASONS = ("not_visible", "over_area", "over_budget", "not_candidate")
+MODES = ("RASTER", "HYBRID", "RAYTRACE")
+
+# Blender's default camera clip_start: the near-plane clamp of D when the engine
+# does not pass the camera's own.
+NEAR_CLIP_DISTANCE = 0.1
+# Clamps that keep every term finite whatever the scene holds.
+MIN_NEAR_CLIP_DISTANCE = 1e-6
+FAR_DISTANCE = 1e12
+MAX_PRIORITY = 1e15
+MAX_RT_COST = 1e12
+MAX_RAYS_PER_PIXEL = 1e6
+MAX_SELECTION_WEIGHT = 1e6
+MAX_VISIBILITY = 1e12
+# Above this many nodes, relevance_edges() refuses (it is quadratic).
+MAX_DEBUG_EDGE_NODES = 2000
+# A hysteresis margin with no element of the other state to cross.
+UNBOUNDED_MARGIN = float(np.finfo(np.float64).max)
+
+
+def _finite(values, *, nan: float, low: float, high: float) -> np.ndarray:
+    array = np.nan_to_num(np.asarray(values, dtype=np.float64), nan=nan, posinf=high, neginf=low)
+    return np.clip(array, low, high)
+
+
+@dataclass
+class FrameElements:
+    """Every element of one frame, as whole arrays of length n.
+
+    Built by the engine from its snapshot and G-buffer; checked once here (shapes
+    and types), then sanitised so that no later term can be NaN or infinite.
+    Element order and names must be stable across frames; names must be unique.
+
+    ``area_px``       pixel count of the element in the element-id target
+    ``frame_px``      width * height of the frame
+    ``centre_ndc``    (n, 2) pixel centroid in normalised device coordinates (-1..1),
+                      any value where ``area_px == 0``
+    ``distance``      camera-space depth (may be <= 0, tiny or huge: see module docstring)
+    ``priority``      K (>= 0); ``rt_cost`` Q (>= 0)
+    ``rays_per_pixel`` rays one pixel of the element costs with its effects
+    ``near_clip``     the camera's clip_start, the near-plane clamp of D
+    Optional arrays default to: candidate True, centre 0, distance 1, K 1, Q 1,
+    no effects, 1 ray per pixel.
+    """
+
+    names: Sequence[str]
+    area_px: np.ndarray
+    frame_px: int
+    candidate: np.ndarray | None = None
+    centre_ndc: np.ndarray | None = None
+    distance: np.ndarray | None = None
+    priority: np.ndarray | None = None
+    rt_cost: np.ndarray | None = None
+    shadows: np.ndarray | None = None
+    reflections: np.ndarray | None = None
+    refractions: np.ndarray | None = None
+    rays_per_pixel: np.ndarray | None = None
+    near_clip: float = NEAR_CLIP_DISTANCE
+
+    def __post_init__(self):
+        self.names = [str(name) for name in self.names]
+        n = len(self.names)
+        if len(set(self.names)) != n:
+            raise ValueError("element names must be unique (the previous selection is keyed by name)")
+
+        def column(name, default, dtype):
+            value = getattr(self, name)
+            array = np.full(n, default, dtype=dtype) if value is None else np.asarray(value)
+            if array.shape != (n,):
+                raise ValueError(f"{name} has shape {array.shape}, expected ({n},) like names")
+            return array
+
+        self.frame_px = int(max(0, self.frame_px))
+        area = column("area_px", 0, np.int64)
+        if area.dtype.kind == "f":
+            area = np.nan_to_num(area, nan=0.0, posinf=0.0, neginf=0.0)
+        self.area_px = np.clip(area.astype(np.int64), 0, self.frame_px)
+        for name in ("candidate", "shadows", "reflections", "refractions"):
+            setattr(self, name, column(name, name == "candidate", bool).astype(bool))
+        centre = np.zeros((n, 2)) if self.centre_ndc is None else np.asarray(self.centre_ndc, dtype=np.float64)
+        if centre.shape != (n, 2):
+            raise ValueError(f"centre_ndc has shape {centre.shape}, expected ({n}, 2)")
+        self.centre_ndc = centre
+        near = float(np.nan_to_num(self.near_clip, nan=NEAR_CLIP_DISTANCE, posinf=NEAR_CLIP_DISTANCE))
+        self.near_clip = near if near >= MIN_NEAR_CLIP_DISTANCE else NEAR_CLIP_DISTANCE
+        self.distance = column("distance", 1.0, np.float64).astype(np.float64)
+        self.priority = _finite(column("priority", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_PRIORITY)
+        self.rt_cost = _finite(column("rt_cost", 1.0, np.float64), nan=1.0, low=0.0, high=MAX_RT_COST)
+        self.rays_per_pixel = _finite(column("rays_per_pixel", 1.0, np.float64), nan=0.0, low=0.0,
+                                      high=MAX_RAYS_PER_PIXEL)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
+@dataclass
+class SelectionSettings:
+    """The scene's settings of the heuristic (``Scene.phrt``), checked once.
+
+    ``mode`` and ``cost_mode`` accept any case ('HYBRID', 'paper', 'PAPER'...).
+    ``n_parallel`` is the paper's N (GPU stream processors there): the number of
+    nodes of phase 1; None means the CPU worker threads (``os.cpu_count()``).
+    """
+
+    budget_ms: float = defaults.BUDGET_MS
+    selection_weight: float = defaults.SELECTION_WEIGHT
+    max_area_fraction: float = defaults.MAX_AREA_FRACTION
+    mode: str = "HYBRID"
+    cost_mode: str = "measured"
+    n_parallel: int | None = None
+
+    def __post_init__(self):
+        self.mode = str(self.mode).strip().upper()
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, not {self.mode!r}")
+        self.cost_mode = normalise_cost_mode(self.cost_mode)
+        for name in ("budget_ms", "selection_weight", "max_area_fraction"):
+            value = float(getattr(self, name))
+            if np.isnan(value) or value < 0:
+                raise ValueError(f"{name} must be a number >= 0, not {value!r}")
+            setattr(self, name, value)
+        self.budget_ms = min(self.budget_ms, MAX_PREDICTED_MS)
+        self.selection_weight = min(self.selection_weight, MAX_SELECTION_WEIGHT)
+        if self.n_parallel is None:
+            self.n_parallel = os.cpu_count() or 1
+        self.n_parallel = int(self.n_parallel)
+        if self.n_parallel < 1:
+            raise ValueError(f"n_parallel must be >= 1, not {self.n_parallel}")
+
+
+@dataclass
+class ElementTerms:
+    """The paper's terms of every element of a frame (arrays of length n)."""
+
+    area_fraction: np.ndarray          # A
+    centre_closeness: np.ndarray       # P
+    distance: np.ndarray               # D (near-clamped)
+    visibility: np.ndarray             # V (normalised, see module docstring)
+    visibility_scale: float            # the frame's largest A*P/D among competing elements
+    cost: np.ndarray                   # C = V * Q
+    previously_selected: np.ndarray    # S
+    relevance: np.ndarray              # R = (S * I + V) * K
+    visible: np.ndarray
+    candidate: np.ndarray              # tagged and K > 0
+    within_area: np.ndarray            # A <= max_area_fraction
+
+
+def previously_selected_mask(names: Sequence[str], previous_selection) -> np.ndarray:
+    """S per element from last frame's selection, keyed by element name.
+
+    ``previous_selection`` may be None (first frame), a :class:`SelectionResult`,
+    a mapping name -> selected, or an iterable of selected names.  Names that
+    are not in this frame are ignored; new names get S = 0.
+    """
+    n = len(names)
+    if previous_selection is None:
+        return np.zeros(n, dtype=bool)
+    if isinstance(previous_selection, SelectionResult):
+        chosen = previous_selection.selected_names()
+    elif isinstance(previous_selection, Mapping):
+        chosen = {str(name) for name, was_selected in previous_selection.items() if was_selected}
+    else:
+        chosen = {str(name) for name in previous_selection}
+    if not chosen:
+        return np.zeros(n, dtype=bool)
+    return np.fromiter((name in chosen for name in names), dtype=bool, count=n)
+
+
+def element_terms(elements: FrameElements, previously_selected: np.ndarray, selection_weight: float,
+                  max_area_fraction: float) -> ElementTerms:
+    """Equations (1)-(3) of the paper on whole arrays, with the clamps of the
+    module docstring.  No term is NaN or infinite."""
+    frame_px = elements.frame_px
+    area_px = elements.area_px
+    visible = area_px > 0 if frame_px > 0 else np.zeros(len(elements), dtype=bool)
+    area_fraction = area_px / frame_px if frame_px > 0 else np.zeros(len(elements))
+    area_fraction = np.clip(area_fraction, 0.0, 1.0)
+
+    centre = elements.centre_ndc
+    centre_ok = visible & np.all(np.isfinite(centre), axis=1)
+    edge_distance = np.max(np.abs(np.where(centre_ok[:, None], centre, 1.0)), axis=1) if len(elements) else np.zeros(0)
+    centre_closeness = np.where(centre_ok, np.clip(1.0 - edge_distance, 0.0, 1.0), 0.0)
+
+    near = elements.near_clip
+    distance = _finite(elements.distance, nan=near, low=near, high=FAR_DISTANCE)
+
+    candidate = elements.candidate & (elements.priority > 0)
+    within_area = area_fraction <= max_area_fraction
+    competing = candidate & visible & within_area
+    raw_visibility = area_fraction * centre_closeness / distance
+    scale = float(raw_visibility[competing].max()) if np.any(competing) else 0.0
+    if not (np.isfinite(scale) and scale > 0):
+        scale = 1.0
+    visibility = _finite(raw_visibility / scale, nan=0.0, low=0.0, high=MAX_VISIBILITY)
+
+    cost = visibility * elements.rt_cost
+    selected_before = np.asarray(previously_selected, dtype=bool)
+    relevance = (selected_before * float(selection_weight) + visibility) * elements.priority
+    return ElementTerms(
+        area_fraction=area_fraction, centre_closeness=centre_closeness, distance=distance,
+        visibility=visibility, visibility_scale=scale, cost=cost, previously_selected=selected_before,
+        relevance=relevance, visible=visible, candidate=candidate, within_area=within_area,
+    )
+
+
+class SelectionGraph:
+    """The selection graph of section V.B for one frame.
+
+    Nodes are the competing elements (``nodes`` holds their element indices),
+    each with its predicted cost in ms (``cost_ms``, the paper's C turned into
+    time by the cost model) and its relevance R.  The paper's two kinds of
+    edges are kept as sorted orders: ``cost_order`` (the cost-ordered linked
+    list, cheapest first; built on first use) and ``relevance_order`` (highest
+    relevance first, ties: cheaper, then lower index).  Building is one sort:
+    O(n log n).
+    """
+
+    def __init__(self, nodes: np.ndarray, cost_ms: np.ndarray, relevance: np.ndarray):
+        self.nodes = np.asarray(nodes, dtype=np.int64)
+        self.cost_ms = np.asarray(cost_ms, dtype=np.float64)
+        self.relevance = np.asarray(relevance, dtype=np.float64)
+        if not (self.nodes.shape == self.cost_ms.shape == self.relevance.shape):
+            raise ValueError("nodes, cost_ms and relevance must have the same length")
+        self.relevance_order = np.lexsort((self.nodes, self.cost_ms, -self.relevance))
+
+    def __len__(self) -> int:
+        return len(self.nodes)
+
+    @cached_property
+    def cost_order(self) -> np.ndarray:
+        return np.lexsort((self.nodes, self.cost_ms))
+
+    def cost_edges(self) -> np.ndarray:
+        """(m, 2) element-index pairs: each node -> the next cheaper node (the
+        paper's linked list, from the most expensive node down)."""
+        ordered = self.nodes[self.cost_order[::-1]]
+        return np.stack([ordered[:-1], ordered[1:]], axis=1) if len(ordered) > 1 else np.zeros((0, 2), np.int64)
+
+    def relevance_edges(self) -> np.ndarray:
+        """(m, 2) element-index pairs: each node -> every node of strictly higher
+        relevance.  Quadratic: for debugging, refused above MAX_DEBUG_EDGE_NODES."""
+        if len(self) > MAX_DEBUG_EDGE_NODES:
+            raise ValueError(f"{len(self)} nodes: relevance edges are O(n^2), exported up to "
+                             f"{MAX_DEBUG_EDGE_NODES} nodes")
+        source, target = np.nonzero(self.relevance[None, :] > self.relevance[:, None])
+        return np.stack([self.nodes[source], self.nodes[target]], axis=1)
+
+    def select(self, time_left_ms: float, n_parallel: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Node selection of section V.C.
+
+        Returns (selected mask over nodes, phase per node: 1, 2 or 0 when not
+        selected, predicted ms of the selection <= time_left_ms).  O(n): the
+        prefix of the relevance order that fits is found with one cumulative
+        sum; after it, a pass that stops when even the cheapest node still ahead
+        no longer fits.
+        """
+        n = len(self)
+        selected = np.zeros(n, dtype=bool)
+        phase = np.zeros(n, dtype=np.int8)
+        if n == 0:
+            return selected, phase, 0.0
+        order = self.relevance_order
+        costs = self.cost_ms[order]
+        cumulative = np.cumsum(costs)
+        fitting = int(np.searchsorted(cumulative, time_left_ms, side="right"))
+        taken = list(range(fitting))
+        spent = float(cumulative[fitting - 1]) if fitting else 0.0
+        if fitting < n - 1:
+            cheapest_ahead = np.minimum.accumulate(costs[::-1])[::-1].tolist()
+            cost_list = costs.tolist()
+            for position in range(fitting + 1, n):
+                if spent + cheapest_ahead[position] > time_left_ms:
+                    break
+                cost = cost_list[position]
+                if spent + cost <= time_left_ms:
+                    spent += cost
+                    taken.append(position)
+        chosen = order[np.asarray(taken, dtype=np.int64)]
+        selected[chosen] = True
+        phase[chosen] = 2
+        phase[chosen[:n_parallel]] = 1
+        return selected, phase, spent
+
+
+@dataclass
+class SelectionResult:
+    """The decision of one frame, with every term, for the engine and the logs.
+
+    Arrays have one entry per element, in the input's element order.  The
+    paper's short names are available as properties (A, P, D, V, C, R, S, K, Q).
+    ``predicted_ms`` is each element's predicted ray tracing ms (what it is
+    charged against T), ``predicted_trace_ms`` the total of the selection,
+    ``time_left_ms`` the T the selection was fitted to.
+    """
+
+    elements: FrameElements
+    terms: ElementTerms
+    selected: np.ndarray
+    reason: list[str]
+    phase: np.ndarray
+    predicted_ms: np.ndarray
+    predicted_trace_ms: float
+    time_left_ms: float
+    mode: str
+    cost_mode: str
+    selection_weight: float
+    frame: int | None = None
+    trace_order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def names(self) -> list[str]:
+        return self.elements.names
+
+    A = property(lambda self: self.terms.area_fraction)
+    P = property(lambda self: self.terms.centre_closeness)
+    D = property(lambda self: self.terms.distance)
+    V = property(lambda self: self.terms.visibility)
+    C = property(lambda self: self.terms.cost)
+    R = property(lambda self: self.terms.relevance)
+    S = property(lambda self: self.terms.previously_selected)
+    K = property(lambda self: self.elements.priority)
+    Q = property(lambda self: self.elements.rt_cost)
+    visible = property(lambda self: self.terms.visible)
+    cost = property(lambda self: self.terms.cost)
+    relevance = property(lambda self: self.terms.relevance)
+    visibility = property(lambda self: self.terms.visibility)
+    T = property(lambda self: self.time_left_ms)
+
+    def selected_names(self) -> frozenset[str]:
+        """The selection as names: next frame's S."""
+        return frozenset(self.names[index] for index in np.flatnonzero(self.selected).tolist())
+
+    def columns(self, frame: int | None = None) -> dict[str, list]:
+        """selection.csv as columns, in SELECTION_COLUMNS order (booleans as 0/1)."""
+        frame = self.frame if frame is None else frame
+        n = len(self.names)
+        as_int = lambda array: np.asarray(array, dtype=np.int64).tolist()  # noqa: E731
+        as_float = lambda array: np.asarray(array, dtype=np.float64).tolist()  # noqa: E731
+        return {
+            "frame": [frame] * n, "element": list(self.names), "visible": as_int(self.visible),
+            "A": as_float(self.A), "P": as_float(self.P), "D": as_float(self.D), "V": as_float(self.V),
+            "Q": as_float(self.Q), "C": as_float(self.C), "K": as_float(self.K), "S": as_int(self.S),
+            "R": as_float(self.R), "selected": as_int(self.selected), "reason": list(self.reason),
+        }
+
+    def rows(self, frame: int | None = None) -> list[dict]:
+        """One dict per element with the keys of SELECTION_COLUMNS, in order."""
+        columns = self.columns(frame)
+        return [dict(zip(SELECTION_COLUMNS, values)) for values in zip(*(columns[key] for key in SELECTION_COLUMNS))]
+
+
+def select(elements: FrameElements, previous_selection=None, settings: SelectionSettings | None = None,
+           model: CostModel | None = None, *, time_left_ms: float | None = None,
+           element_ms: np.ndarray | None = None, frame: int | None = None) -> SelectionResult:
+    """Choose this frame's ray traced elements (sections V.B-V.D).
+
+    ``previous_selection``: last frame's selection (see previously_selected_mask).
+    ``model``: the cost model giving T and each element's predicted ms; a cold
+    :class:`CostModel` when None.  ``time_left_ms`` and ``element_ms`` override
+    the model's T and predicted ms (tests, replays).
+    """
+    settings = settings or SelectionSettings()
+    model = model or CostModel()
+    previously_selected = previously_selected_mask(elements.names, previous_selection)
+    terms = element_terms(elements, previously_selected, settings.selection_weight, settings.max_area_fraction)
+
+    if element_ms is None:
+        predicted_ms = model.predict_element_ms(elements, terms.cost, settings.cost_mode)
+    else:
+        predicted_ms = np.asarray(element_ms, dtype=np.float64)
+        if predicted_ms.shape != (len(elements),):
+            raise ValueError(f"element_ms has shape {predicted_ms.shape}, expected ({len(elements)},)")
+        predicted_ms = _finite(predicted_ms, nan=0.0, low=0.0, high=MAX_PREDICTED_MS)
+    if settings.mode == "RASTER":
+        time_left = 0.0
+    else:
+        time_left = model.time_left(settings.budget_ms) if time_left_ms is None else time_left_ms
+        time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
+
+    n = len(elements)
+    eligible = terms.candidate & terms.visible
+    if settings.mode == "HYBRID":
+        eligible &= terms.within_area
+    selected = np.zeros(n, dtype=bool)
+    phase = np.zeros(n, dtype=np.int8)
+    trace_order = np.zeros(0, dtype=np.int64)
+    if settings.mode == "HYBRID":
+        nodes = np.flatnonzero(eligible)
+        graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes])
+        node_selected, node_phase, predicted_trace = graph.select(time_left, settings.n_parallel)
+        selected[nodes] = node_selected
+        phase[nodes] = node_phase
+        trace_order = nodes[graph.relevance_order[node_selected[graph.relevance_order]]]
+    elif settings.mode == "RAYTRACE":
+        selected = eligible.copy()
+        phase[selected] = 1
+        trace_order = np.flatnonzero(selected)[np.lexsort((np.flatnonzero(selected), -terms.relevance[selected]))]
+        predicted_trace = float(np.sum(predicted_ms[selected]))
+    else:
+        predicted_trace = 0.0
+
+    reason = np.full(n, "over_budget", dtype=object)
+    reason[~terms.within_area] = "over_area"
+    reason[~terms.visible] = "not_visible"
+    reason[~terms.candidate] = "not_candidate"
+    reason[selected] = ""
+    return SelectionResult(
+        elements=elements, terms=terms, selected=selected, reason=reason.tolist(), phase=phase,
+        predicted_ms=predicted_ms, predicted_trace_ms=float(min(predicted_trace, MAX_PREDICTED_MS)),
+        time_left_ms=time_left, mode=settings.mode, cost_mode=settings.cost_mode,
+        selection_weight=settings.selection_weight, frame=frame, trace_order=trace_order,
+    )
+
+
+def hysteresis_margin(result: SelectionResult) -> np.ndarray:
+    """Per element, how much its V may change and leave its state unchanged.
+
+    See "Hysteresis margin" in the module docstring.  Defined for HYBRID
+    results; ``UNBOUNDED_MARGIN`` where no element of the other state can be
+    crossed (non-competing elements, K = 0, no rival on the relevant side).
+    Assumes the element's cost and the frame's visibility scale stay as they
+    are (V changed through D, the element not the frame's most visible).
+    """
+    n = len(result.names)
+    margin = np.full(n, UNBOUNDED_MARGIN)
+    competing = result.terms.candidate & result.visible & result.terms.within_area
+    nodes = np.flatnonzero(competing)
+    if len(nodes) == 0 or result.mode != "HYBRID":
+        return margin
+    graph = SelectionGraph(nodes, result.predicted_ms[nodes], result.R[nodes])
+    ordered = nodes[graph.relevance_order]
+    relevance = result.R[ordered]
+    chosen = result.selected[ordered]
+    priority = result.K[ordered]
+    positions = np.arange(len(ordered))
+    unselected_positions = positions[~chosen]
+    selected_positions = positions[chosen]
+    gap = np.full(len(ordered), np.inf)
+    # Selected: the first unselected node after it has the highest relevance below.
+    after = np.searchsorted(unselected_positions, positions, side="right")
+    has_below = chosen & (after < len(unselected_positions))
+    below = unselected_positions[np.minimum(after, max(len(unselected_positions) - 1, 0))] if len(
+        unselected_positions) else positions
+    gap[has_below] = relevance[has_below] - relevance[below[has_below]]
+    # Unselected: the last selected node before it has the lowest relevance above.
+    before = np.searchsorted(selected_positions, positions, side="left") - 1
+    has_above = ~chosen & (before >= 0)
+    above = selected_positions[np.maximum(before, 0)] if len(selected_positions) else positions
+    gap[has_above] = relevance[above[has_above]] - relevance[has_above]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        in_visibility = np.where(priority > 0, gap / priority, np.inf)
+    margin[ordered] = np.where(np.isfinite(in_visibility), in_visibility, UNBOUNDED_MARGIN)
+    return margin
+
+
+def selection_flips(history: Iterable, names: Iterable[str] | None = None) -> dict[str, float]:
+    """Selection flips per element per 100 frames, from a run's selections.
+
+    ``history`` holds one selection per frame in order: a SelectionResult, a
+    mapping name -> selected, or an iterable of selected names.  A flip is a
+    change of an element's selected state between consecutive frames (an
+    element absent from a frame counts as not selected); the rate is per 100
+    frame-to-frame transitions.  ``names`` adds elements never selected (rate 0).
+    """
+    selections = []
+    for entry in history:
+        if isinstance(entry, SelectionResult):
+            selections.append(entry.selected_names())
+        elif isinstance(entry, Mapping):
+            selections.append(frozenset(str(name) for name, chosen in entry.items() if chosen))
+        else:
+            selections.append(frozenset(str(name) for name in entry))
+    everyone = set(names or ()).union(*selections) if selections else set(names or ())
+    flips = dict.fromkeys(sorted(everyone), 0)
+    for before, after in zip(selections, selections[1:]):
+        for name in before.symmetric_difference(after):
+            flips[name] += 1
+    transitions = max(len(selections) - 1, 1)
+    return {name: 100.0 * count / transitions for name, count in flips.items()}

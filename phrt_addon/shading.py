@@ -1,0 +1,201 @@
+"""Shading: one physically plausible BRDF for raster lighting and ray hits alike.
+
+Deferred lighting runs here in numpy on the read-back G-buffer (raster, hybrid
+and raytrace frames), and the tracer shades its hits with the same functions,
+so "raster" and "traced" differ only in visibility and in what the specular
+lobe sees - never in the BRDF.
+
+BRDF: Lambert diffuse weighted by (1 - metallic)(1 - transmission), plus
+GGX / Smith (Schlick-GGX) / Schlick-Fresnel specular with F0 = mix(F0(ior),
+base colour, metallic).  Roughness is clamped to ``MIN_ROUGHNESS`` for the
+analytic lights (a perfect mirror would give an infinitely thin highlight).
+
+Light units follow Cycles: point, spot and area lights in watts (radiant
+intensity P/4pi for point and spot, P cos(theta)/pi for one-sided area), sun in
+W/m^2 (irradiance).  The world colour is a uniform environment: it adds
+``albedo * world`` diffuse ambient and ``F * world`` specular ambient (the raster
+stand-in for reflections that are not ray traced).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MIN_ROUGHNESS = 0.04
+INV_PI = 1.0 / np.pi
+
+
+@dataclass
+class SurfaceSamples:
+    """N shading points (whole arrays, float64 unless noted)."""
+
+    position: np.ndarray  # (N,3) world, relative to ``origin``
+    normal: np.ndarray  # (N,3) unit, facing the viewer
+    view: np.ndarray  # (N,3) unit, from the surface towards the viewer
+    albedo: np.ndarray  # (N,3)
+    metallic: np.ndarray  # (N,)
+    roughness: np.ndarray  # (N,)
+    transmission: np.ndarray  # (N,)
+    ior: np.ndarray  # (N,)
+    emission: np.ndarray  # (N,3)
+
+    def __len__(self):
+        return len(self.position)
+
+
+class MaterialTable:
+    """Per-material parameters as arrays indexed by material index."""
+
+    def __init__(self, materials):
+        count = max(len(materials), 1)
+        self.base_color = np.full((count, 3), 0.8)
+        self.metallic = np.zeros(count)
+        self.roughness = np.full(count, 0.5)
+        self.transmission = np.zeros(count)
+        self.ior = np.full(count, 1.5)
+        self.alpha = np.ones(count)
+        self.emission = np.zeros((count, 3))
+        for index, material in enumerate(materials):
+            self.base_color[index] = material.base_color[:3]
+            self.metallic[index] = material.metallic
+            self.roughness[index] = material.roughness
+            self.transmission[index] = material.transmission
+            self.ior[index] = material.ior
+            self.alpha[index] = material.alpha
+            self.emission[index] = material.emission[:3]
+        for array in (self.base_color, self.metallic, self.roughness, self.transmission, self.alpha, self.emission):
+            np.nan_to_num(array, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+        np.clip(self.base_color, 0.0, 1.0, out=self.base_color)
+        np.clip(self.metallic, 0.0, 1.0, out=self.metallic)
+        np.clip(self.roughness, 0.0, 1.0, out=self.roughness)
+        np.clip(self.transmission, 0.0, 1.0, out=self.transmission)
+        np.clip(self.alpha, 0.0, 1.0, out=self.alpha)
+        self.ior = np.clip(np.nan_to_num(self.ior, nan=1.5), 1.0, 4.0)
+        np.clip(self.emission, 0.0, 1e6, out=self.emission)
+
+
+def normalize(vectors):
+    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    return vectors / np.maximum(length, 1e-30)
+
+
+def f0_dielectric(ior):
+    return ((ior - 1.0) / (ior + 1.0)) ** 2
+
+
+def specular_f0(albedo, metallic, ior):
+    dielectric = f0_dielectric(ior)[:, None] * np.ones((1, 3))
+    return dielectric + (albedo - dielectric) * metallic[:, None]
+
+
+def fresnel_schlick(f0, cos_theta):
+    cos_theta = np.clip(cos_theta, 0.0, 1.0)
+    return f0 + (1.0 - f0) * ((1.0 - cos_theta) ** 5)[:, None]
+
+
+def fresnel_dielectric(cos_incident, eta):
+    """Exact unpolarised Fresnel reflectance for relative IOR ``eta`` = n_transmitted / n_incident.
+    Returns 1 under total internal reflection."""
+    cos_i = np.clip(np.abs(cos_incident), 0.0, 1.0)
+    sin2_t = (1.0 - cos_i ** 2) / (eta ** 2)
+    total = sin2_t >= 1.0
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
+    rs = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-30)
+    rp = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-30)
+    return np.where(total, 1.0, 0.5 * (rs ** 2 + rp ** 2))
+
+
+def reflect(incident, normal):
+    """Mirror ``incident`` (pointing towards the surface) about ``normal``."""
+    return incident - 2.0 * np.sum(incident * normal, axis=-1, keepdims=True) * normal
+
+
+def refract(incident, normal, eta):
+    """Snell refraction of unit ``incident`` through a surface with unit ``normal`` facing
+    the incident side; ``eta`` = n_incident / n_transmitted.  Returns (direction, total_internal_reflection)."""
+    cos_i = -np.sum(incident * normal, axis=-1)
+    sin2_t = eta ** 2 * np.clip(1.0 - cos_i ** 2, 0.0, 1.0)
+    total = sin2_t > 1.0
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
+    direction = eta[:, None] * incident + (eta * cos_i - cos_t)[:, None] * normal
+    direction = np.where(total[:, None], reflect(incident, normal), direction)
+    return normalize(direction), total
+
+
+def brdf_cosine(surface: SurfaceSamples, light_dir):
+    """BRDF times cos(theta_light): (N,3), for unit ``light_dir`` (surface to light)."""
+    n, v, l = surface.normal, surface.view, light_dir
+    n_dot_l = np.sum(n * l, axis=-1)
+    n_dot_v = np.clip(np.sum(n * v, axis=-1), 1e-4, 1.0)
+    lit = n_dot_l > 0.0
+    n_dot_l = np.clip(n_dot_l, 0.0, 1.0)
+    h = normalize(v + l)
+    n_dot_h = np.clip(np.sum(n * h, axis=-1), 0.0, 1.0)
+    v_dot_h = np.clip(np.sum(v * h, axis=-1), 0.0, 1.0)
+    alpha = np.maximum(surface.roughness, MIN_ROUGHNESS) ** 2
+    alpha2 = alpha ** 2
+    denom = n_dot_h ** 2 * (alpha2 - 1.0) + 1.0
+    distribution = alpha2 / np.maximum(np.pi * denom ** 2, 1e-30)
+    k = alpha / 2.0
+    geometry = (n_dot_l / np.maximum(n_dot_l * (1 - k) + k, 1e-30)) * (n_dot_v / (n_dot_v * (1 - k) + k))
+    f0 = specular_f0(surface.albedo, surface.metallic, surface.ior)
+    fresnel = fresnel_schlick(f0, v_dot_h)
+    specular = fresnel * (distribution * geometry / np.maximum(4.0 * n_dot_l * n_dot_v, 1e-4))[:, None]
+    diffuse_weight = (1.0 - surface.metallic) * (1.0 - surface.transmission)
+    diffuse = surface.albedo * (diffuse_weight * INV_PI)[:, None] * (1.0 - fresnel)
+    result = (diffuse + specular) * n_dot_l[:, None]
+    return np.where(lit[:, None], result, 0.0)
+
+
+def light_incidence(light, position, origin):
+    """For points (N,3, relative to ``origin``): unit direction to the light, distance to it
+    (inf for the sun) and the irradiance arriving there (N,3), before shadows and cosine."""
+    color = np.asarray(light.color, dtype=np.float64)
+    n = len(position)
+    if light.kind == "SUN":
+        direction = -normalize(np.asarray(light.direction, dtype=np.float64))
+        return np.broadcast_to(direction, (n, 3)).copy(), np.full(n, np.inf), np.broadcast_to(color, (n, 3)).copy()
+    light_position = np.asarray(light.position, dtype=np.float64) - origin
+    to_light = light_position - position
+    distance = np.linalg.norm(to_light, axis=-1)
+    safe = np.maximum(distance, 1e-6)
+    direction = to_light / safe[:, None]
+    axis = normalize(np.asarray(light.direction, dtype=np.float64))
+    if light.kind == "AREA":
+        intensity = np.clip(-(direction @ axis), 0.0, 1.0) * INV_PI
+    else:
+        intensity = np.full(n, 0.25 * INV_PI)
+        if light.kind == "SPOT":
+            cos_angle = -(direction @ axis)
+            outer = np.cos(light.spot_size / 2.0)
+            blend = max(float(light.spot_blend), 1e-4)
+            inner = outer + (1.0 - outer) * blend
+            spot = np.clip((cos_angle - outer) / max(inner - outer, 1e-6), 0.0, 1.0)
+            intensity = intensity * spot * spot * (3.0 - 2.0 * spot)
+    # Inverse-square falloff, softened inside a small radius so a light touching a surface stays finite.
+    radius = max(float(light.radius), 1e-3)
+    irradiance = color[None, :] * (intensity / (distance ** 2 + radius ** 2))[:, None]
+    return direction, distance, irradiance
+
+
+def ambient(surface: SurfaceSamples, world_color):
+    """Uniform-environment lighting: diffuse ambient plus the raster stand-in for reflections."""
+    world = np.asarray(world_color, dtype=np.float64)[None, :]
+    n_dot_v = np.clip(np.sum(surface.normal * surface.view, axis=-1), 0.0, 1.0)
+    f0 = specular_f0(surface.albedo, surface.metallic, surface.ior)
+    fresnel = environment_fresnel(f0, n_dot_v, surface.roughness)
+    diffuse_weight = (1.0 - surface.metallic) * (1.0 - surface.transmission)
+    diffuse = surface.albedo * diffuse_weight[:, None] * (1.0 - fresnel) * world
+    return diffuse, fresnel
+
+
+def environment_fresnel(f0, n_dot_v, roughness):
+    """Schlick Fresnel with a roughness-dependent ceiling (rough surfaces reflect less at grazing)."""
+    ceiling = np.maximum(1.0 - roughness, f0.max(axis=-1))[:, None]
+    return f0 + (np.maximum(ceiling, f0) - f0) * ((1.0 - np.clip(n_dot_v, 0.0, 1.0)) ** 5)[:, None]
+
+
+def finite(image, limit=1e6):
+    """Clamp to finite, non-negative radiance: no NaN or Inf ever leaves a stage."""
+    return np.clip(np.nan_to_num(image, nan=0.0, posinf=limit, neginf=0.0), 0.0, limit)

@@ -1,0 +1,184 @@
+"""Raster shadows: light views for shadow maps and their lookup in numpy.
+
+The GPU draws the depth maps (``engine/raster.py``); everything else is here so
+it is tested without Blender.  Sun lights get one orthographic view fitted to
+the scene bounds, spot lights one perspective view covering the cone, point and
+area lights six 90-degree cube faces.
+
+Precision: every view keeps an ``origin`` (scene centre for the sun, the light
+position otherwise) and its matrices act on positions relative to it, so huge
+world coordinates do not cost float32 precision on the GPU.
+
+Lookup: 2x2 percentage-closer filtering with a normal offset of 1.5 texels and
+a comparison in linear light-space depth.  The result is the raster shadow the
+ray tracer replaces for selected casters (its softness and blockiness are what
+ray traced shadows improve on).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+NORMAL_OFFSET_TEXELS = 1.5
+DEPTH_BIAS_TEXELS = 1.0
+
+
+@dataclass
+class LightView:
+    origin: np.ndarray  # (3,) float64
+    view: np.ndarray  # (4,4) float64, acts on positions relative to origin
+    projection: np.ndarray  # (4,4) float64
+    size: int
+    ortho: bool
+    near: float
+    far: float
+    texel_angle: float  # perspective: radians per texel; ortho: metres per texel
+
+    @property
+    def view_proj_relative(self) -> np.ndarray:
+        return self.projection @ self.view
+
+
+@dataclass
+class ShadowMap:
+    view: LightView
+    depth: np.ndarray  # (size, size) float32 window depth in [0, 1], row 0 at the bottom
+
+
+def look_at(forward, up_hint=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """View rotation (4x4) looking along ``forward`` (camera -Z) from the origin."""
+    forward = np.asarray(forward, dtype=np.float64)
+    forward = forward / max(np.linalg.norm(forward), 1e-300)
+    up = np.asarray(up_hint, dtype=np.float64)
+    if abs(np.dot(up, forward)) > 0.99:
+        up = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = right, true_up, -forward
+    return view
+
+
+def perspective(fov, near, far) -> np.ndarray:
+    focal = 1.0 / np.tan(fov / 2.0)
+    projection = np.zeros((4, 4))
+    projection[0, 0] = projection[1, 1] = focal
+    projection[2, 2] = (far + near) / (near - far)
+    projection[2, 3] = 2.0 * far * near / (near - far)
+    projection[3, 2] = -1.0
+    return projection
+
+
+def orthographic(left, right, bottom, top, near, far) -> np.ndarray:
+    projection = np.eye(4)
+    projection[0, 0] = 2.0 / (right - left)
+    projection[1, 1] = 2.0 / (top - bottom)
+    projection[2, 2] = -2.0 / (far - near)
+    projection[0, 3] = -(right + left) / (right - left)
+    projection[1, 3] = -(top + bottom) / (top - bottom)
+    projection[2, 3] = -(far + near) / (far - near)
+    return projection
+
+
+CUBE_FACES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+
+
+def _corners(bounds):
+    low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
+    return np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
+
+
+def light_views(light, bounds, size) -> list[LightView]:
+    """The shadow-map views of ``light`` covering the scene ``bounds`` ((min, max) world)."""
+    low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
+    extent = max(float(np.max(high - low)), 1e-6)
+    corners = _corners(bounds)
+    if light.kind == "SUN":
+        origin = (low + high) / 2.0
+        view = look_at(light.direction)
+        local = (corners - origin) @ view[:3, :3].T
+        margin = 0.01 * extent
+        left, bottom = local[:, 0].min() - margin, local[:, 1].min() - margin
+        right, top = local[:, 0].max() + margin, local[:, 1].max() + margin
+        near, far = -local[:, 2].max() - margin, -local[:, 2].min() + margin
+        span = max(right - left, top - bottom)
+        return [LightView(origin, view, orthographic(left, right, bottom, top, near, far), size, True,
+                          near, far, span / size)]
+    origin = np.asarray(light.position, dtype=np.float64)
+    distances = np.linalg.norm(corners - origin, axis=1)
+    far = max(float(distances.max()), 1e-3) * 1.01
+    near = max(far * 1e-4, 1e-4 * extent, 1e-6)
+    if light.kind == "SPOT":
+        fov = min(float(light.spot_size) * 1.05 + 0.02, np.radians(170.0))
+        return [LightView(origin, look_at(light.direction), perspective(fov, near, far), size, False,
+                          near, far, fov / size)]
+    face_size = max(size // 2, 64)
+    return [LightView(origin, look_at(face), perspective(np.pi / 2.0, near, far), face_size, False,
+                      near, far, (np.pi / 2.0) / face_size) for face in CUBE_FACES]
+
+
+def _linear_depth(view: LightView, window_depth):
+    """Window depth in [0,1] -> distance along the light's view axis."""
+    if view.ortho:
+        return view.near + window_depth * (view.far - view.near)
+    z_ndc = window_depth * 2.0 - 1.0
+    n, f = view.near, view.far
+    return 2.0 * n * f / np.maximum(f + n - z_ndc * (f - n), 1e-300)
+
+
+def _lookup_one(shadow_map: ShadowMap, points, normals):
+    """Lit fraction in [0,1] for points seen by one view; NaN where outside this view."""
+    view = shadow_map.view
+    relative = points - view.origin
+    view_space = relative @ view.view[:3, :3].T
+    axis_depth = -view_space[:, 2]
+    texel = view.texel_angle if view.ortho else view.texel_angle * np.maximum(axis_depth, view.near)
+    offset_points = relative + normals * (NORMAL_OFFSET_TEXELS * texel)[:, None]
+    clip = offset_points @ view.view_proj_relative[:3, :3].T + view.view_proj_relative[:3, 3]
+    w = offset_points @ view.view_proj_relative[3, :3] + view.view_proj_relative[3, 3]
+    valid = w > 1e-12
+    safe_w = np.where(valid, w, 1.0)
+    ndc = clip / safe_w[:, None]
+    inside = valid & np.all(np.abs(ndc[:, :2]) <= 1.0, axis=1) & (ndc[:, 2] <= 1.0)
+    receiver_depth = -(offset_points @ view.view[:3, :3].T)[:, 2]
+    size = view.size
+    u = (ndc[:, 0] * 0.5 + 0.5) * size - 0.5
+    v = (ndc[:, 1] * 0.5 + 0.5) * size - 0.5
+    u0, v0 = np.floor(u), np.floor(v)
+    fu, fv = u - u0, v - v0
+    u0 = u0.astype(np.int64)
+    v0 = v0.astype(np.int64)
+    lit = np.zeros(len(points))
+    bias = DEPTH_BIAS_TEXELS * texel
+    for du, dv, weight in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+        x = np.clip(u0 + du, 0, size - 1)
+        y = np.clip(v0 + dv, 0, size - 1)
+        occluder = _linear_depth(view, shadow_map.depth[y, x].astype(np.float64))
+        lit += weight * (receiver_depth <= occluder + bias)
+    return np.where(inside, lit, np.nan)
+
+
+def shadow_visibility(shadow_maps, points, normals) -> np.ndarray:
+    """Lit fraction in [0,1] of each world point (float64 (N,3)) for one light's maps.
+    Points outside every map are lit (nothing was drawn there to occlude them)."""
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    if len(points) == 0 or not shadow_maps:
+        return np.ones(len(points))
+    if len(shadow_maps) == 6:
+        # Cube: each point is looked up in the face of its major axis only.
+        relative = points - shadow_maps[0].view.origin
+        axis = np.argmax(np.abs(relative), axis=1)
+        sign = np.take_along_axis(relative, axis[:, None], axis=1)[:, 0] < 0
+        face = axis * 2 + sign
+        result = np.ones(len(points))
+        for index, shadow_map in enumerate(shadow_maps):
+            chosen = face == index
+            if np.any(chosen):
+                lit = _lookup_one(shadow_map, points[chosen], normals[chosen])
+                result[chosen] = np.where(np.isnan(lit), 1.0, lit)
+        return result
+    lit = _lookup_one(shadow_maps[0], points, normals)
+    return np.where(np.isnan(lit), 1.0, lit)

@@ -1,0 +1,147 @@
+"""Blender properties of PHRT: what designers tag on objects and materials, and
+the scene-wide settings of the hybrid renderer (CONTRACT.md section 3).
+
+Each PropertyGroup attaches itself in its ``register()`` classmethod and
+detaches in ``unregister()``.
+"""
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+
+from .phrt_addon import defaults
+
+
+def _element_fields(owner):
+    """The per-element fields, shared by objects and materials."""
+    return {
+        "candidate": BoolProperty(
+            name="Ray Tracing Candidate",
+            description=f"Tag this {owner} as an element that PHRT may ray trace when the heuristic picks it",
+            default=False,
+        ),
+        "priority": FloatProperty(
+            name="Priority (K)",
+            description="The paper's K: how much this element matters relative to the others (0 = never worth tracing)",
+            default=1.0, min=0.0, soft_max=10.0,
+        ),
+        "shadows": BoolProperty(
+            name="Shadows",
+            description="Ray trace the shadows this element casts (on any surface), instead of shadow-mapping them",
+            default=True,
+        ),
+        "reflections": BoolProperty(
+            name="Reflections",
+            description="Ray trace reflections on this element's surface",
+            default=True,
+        ),
+        "refractions": BoolProperty(
+            name="Refractions",
+            description="Ray trace refraction through this element (transparency is refraction with IOR 1)",
+            default=True,
+        ),
+        "rt_cost": FloatProperty(
+            name="Cost Multiplier (Q)",
+            description="The paper's Q: a multiplier on the engine's own measured ray tracing cost of this element",
+            default=1.0, min=1e-3, soft_max=10.0,
+        ),
+    }
+
+
+class PHRT_ObjectSettings(bpy.types.PropertyGroup):
+    """Whole-object element tags (Object.phrt)."""
+
+    __annotations__ = _element_fields("object")
+
+    @classmethod
+    def register(cls):
+        bpy.types.Object.phrt = PointerProperty(type=cls, name="PHRT", description="PHRT ray tracing candidate settings")
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.Object.phrt
+
+
+class PHRT_MaterialSettings(bpy.types.PropertyGroup):
+    """Material-slot element tags (Material.phrt): each object using a tagged
+    material contributes one element made of that material's faces."""
+
+    __annotations__ = _element_fields("material")
+
+    @classmethod
+    def register(cls):
+        bpy.types.Material.phrt = PointerProperty(type=cls, name="PHRT", description="PHRT ray tracing candidate settings")
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.Material.phrt
+
+
+class PHRT_SceneSettings(bpy.types.PropertyGroup):
+    """Scene-wide settings of the hybrid renderer (Scene.phrt)."""
+
+    mode: EnumProperty(
+        name="Mode",
+        description="How PHRT renders the frame",
+        items=(
+            ("RASTER", "Raster", "Raster only: G-buffer, shadow maps and blending; no ray tracing at all", 0),
+            ("HYBRID", "Hybrid", "Raster plus ray tracing of the elements the heuristic selects within the budget", 1),
+            ("RAYTRACE", "Ray Trace", "Ray trace every visible candidate with no budget: the reference image", 2),
+        ),
+        default="HYBRID",
+    )
+    budget_ms: FloatProperty(
+        name="Frame Budget",
+        description="Frame time target in milliseconds; the heuristic fits ray tracing into what raster leaves",
+        default=defaults.BUDGET_MS, min=0.0, soft_max=1000.0,
+    )
+    selection_weight: FloatProperty(
+        name="Selection Weight (I)",
+        description="The paper's I: relevance bonus of an element selected last frame, which keeps elements "
+                    "from flickering between raster and ray tracing",
+        default=defaults.SELECTION_WEIGHT, min=0.0, soft_max=10.0,
+    )
+    max_area_fraction: FloatProperty(
+        name="Max Area",
+        description="Elements covering more than this fraction of the frame are never ray traced",
+        default=defaults.MAX_AREA_FRACTION, min=0.0, max=1.0, subtype="FACTOR",
+    )
+    max_bounces: IntProperty(
+        name="Max Bounces",
+        description="Maximum depth of reflection and refraction rays",
+        default=defaults.MAX_BOUNCES, min=0, max=16,
+    )
+    cost_mode: EnumProperty(
+        name="Cost Model",
+        description="How the heuristic turns an element's cost into predicted milliseconds",
+        items=(
+            ("PAPER", "Paper", "C = V * Q, scaled to milliseconds by a factor fitted to measured trace times", 0),
+            ("MEASURED", "Measured", "Predicted from the element's pixel count and the measured cost per ray of "
+                                     "its effects, times Q", 1),
+        ),
+        default="MEASURED",
+    )
+    shadow_map_size: IntProperty(
+        name="Shadow Map Size",
+        description="Resolution in pixels of the raster shadow maps",
+        default=defaults.SHADOW_MAP_SIZE, min=128, max=8192,
+    )
+
+    @classmethod
+    def register(cls):
+        bpy.types.Scene.phrt = PointerProperty(type=cls, name="PHRT", description="PHRT render settings")
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.Scene.phrt
+
+
+CLASSES = (PHRT_ObjectSettings, PHRT_MaterialSettings, PHRT_SceneSettings)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
