@@ -43,8 +43,9 @@ void main() {
   out_position = vec4(v_position, 1.0);
   out_normal = vec4(n, params.x);
   /* albedo as 8-bit sqrt-encoded RGB and metallic as 8 bits: enough for shading inputs */
-  uvec4 packed = uvec4(round(vec4(sqrt(albedo.rgb), clamp(params.y, 0.0, 1.0)) * 255.0));
-  out_ids = uvec2(uint(ids), packed.r | (packed.g << 8u) | (packed.b << 16u) | (packed.a << 24u));
+  uvec4 bits = uvec4(round(vec4(sqrt(albedo.rgb), clamp(params.y, 0.0, 1.0)) * 255.0));
+  out_ids = uint(ids);
+  out_material = bits.r | (bits.g << 8u) | (bits.b << 16u) | (bits.a << 24u);
 }
 """
 
@@ -199,7 +200,8 @@ class RasterPass:
             info.vertex_out(interface)
             info.fragment_out(0, "VEC4", "out_position")
             info.fragment_out(1, "VEC4", "out_normal")
-            info.fragment_out(2, "UVEC2", "out_ids")
+            info.fragment_out(2, "UINT", "out_ids")
+            info.fragment_out(3, "UINT", "out_material")
         info.vertex_source(vert)
         info.fragment_source(frag)
         return gpu.shader.create_from_info(info)
@@ -262,9 +264,10 @@ class RasterPass:
 
         tex_position = gpu.types.GPUTexture((width, height), format="RGBA32F")
         tex_normal = gpu.types.GPUTexture((width, height), format="RGBA32F")
-        tex_ids = gpu.types.GPUTexture((width, height), format="RG32UI")
+        tex_ids = gpu.types.GPUTexture((width, height), format="R32UI")
+        tex_material = gpu.types.GPUTexture((width, height), format="R32UI")
         tex_depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
-        framebuffer = gpu.types.GPUFrameBuffer(depth_slot=tex_depth, color_slots=(tex_position, tex_normal, tex_ids))
+        framebuffer = gpu.types.GPUFrameBuffer(depth_slot=tex_depth, color_slots=(tex_position, tex_normal, tex_ids, tex_material))
         materials = self.snapshot.materials
         transparent = np.array([m.is_transparent for m in materials], dtype=bool)
         has_transparent = any(transparent[material] for _, groups in self.batches for material, _, _ in groups)
@@ -290,7 +293,7 @@ class RasterPass:
         finally:
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)
-            del framebuffer, tex_position, tex_normal, tex_ids, tex_depth, ubo
+            del framebuffer, tex_position, tex_normal, tex_ids, tex_material, tex_depth, ubo
 
         forward = camera.forward
         front = np.where(transparent_layer.covered[..., None], transparent_layer.position, opaque.position)
@@ -324,9 +327,11 @@ class RasterPass:
         buffer = gpu.types.Buffer("FLOAT", n * 4)
         framebuffer.read_color(0, 0, width, height, 4, 1, "FLOAT", data=buffer)
         normal = np.asarray(buffer, dtype=np.float32).reshape(height, width, 4).copy()
-        ids_buffer = gpu.types.Buffer("UINT", n * 2)
-        framebuffer.read_color(0, 0, width, height, 2, 2, "UINT", data=ids_buffer)
-        ids = np.asarray(ids_buffer, dtype=np.uint32).reshape(height, width, 2).copy()
+        ids = np.empty((height, width, 2), np.uint32)
+        for slot in (2, 3):  # R32UI targets (RG32UI read-back returned zeros on llvmpipe)
+            ids_buffer = gpu.types.Buffer("UINT", n)
+            framebuffer.read_color(0, 0, width, height, 1, slot, "UINT", data=ids_buffer)
+            ids[..., slot - 2] = np.asarray(ids_buffer, dtype=np.uint32).reshape(height, width)
         return decode_layer(position, normal, ids)
 
     # -- shadow maps --------------------------------------------------------
@@ -366,23 +371,23 @@ class RasterPass:
 
 
 def decode_layer(position: np.ndarray, normal: np.ndarray, ids: np.ndarray) -> GBufferLayer:
-    """Turn the raw read-back targets into a ``GBufferLayer`` (whole-array numpy)."""
+    """Turn the raw read-back targets into a ``GBufferLayer`` (whole-array numpy).
+    Cleared pixels read as zeros in every target, so no masking is needed."""
     covered = position[..., 3] > 0.5  # the shader writes w = 1; cleared pixels are 0
-    packed = ids[..., 0]
-    element = (packed & 0x7FFF).astype(np.int32) - 1
-    material = ((packed >> 15) & 0xFFFF).astype(np.int32)
-    albedo_bits = ids[..., 1]
-    albedo = np.stack([(albedo_bits >> shift) & 0xFF for shift in (0, 8, 16)], axis=-1).astype(np.float32) / 255.0
+    element = (ids[..., 0] & 0x7FFF).astype(np.int32) - 1
+    material = ((ids[..., 0] >> 15) & 0xFFFF).astype(np.int32)
+    material[~covered] = -1
+    bits = np.ascontiguousarray(ids[..., 1], dtype="<u4")
+    packed = bits.view(np.uint8).reshape(bits.shape + (4,))  # little-endian: r, g, b, metallic
+    albedo = packed[..., :3].astype(np.float32) * (1.0 / 255.0)
     albedo *= albedo
-    norm = np.linalg.norm(normal[..., :3], axis=-1, keepdims=True)
-    unit_normal = np.where(norm > 0, normal[..., :3] / np.maximum(norm, 1e-12), 0.0).astype(np.float32)
     return GBufferLayer(
         covered=covered,
-        position=np.where(covered[..., None], position[..., :3], 0.0).astype(np.float32),
-        normal=unit_normal,
-        roughness=np.where(covered, normal[..., 3], 0.0).astype(np.float32),
-        albedo=np.where(covered[..., None], albedo, 0.0).astype(np.float32),
-        metallic=np.where(covered, ((albedo_bits >> 24) & 0xFF) / 255.0, 0.0).astype(np.float32),
-        material=np.where(covered, material, -1).astype(np.int32),
-        element=np.where(covered, element, -1).astype(np.int32),
+        position=np.ascontiguousarray(position[..., :3]),
+        normal=np.ascontiguousarray(normal[..., :3]),
+        roughness=np.ascontiguousarray(normal[..., 3]),
+        albedo=albedo,
+        metallic=packed[..., 3].astype(np.float32) * (1.0 / 255.0),
+        material=material,
+        element=element,
     )

@@ -98,6 +98,7 @@ class RobustEstimate:
         if not (0.0 < smoothing <= 1.0 and gate_ratio > 1.0 and 1 <= confirm <= window):
             raise ValueError("need 0 < smoothing <= 1, gate_ratio > 1 and 1 <= confirm <= window")
         self._log_value = math.log(prior)
+        self._value = float(prior)
         self._smoothing = smoothing
         self._log_gate = math.log(gate_ratio)
         self._confirm = confirm
@@ -108,7 +109,7 @@ class RobustEstimate:
 
     @property
     def value(self) -> float:
-        return math.exp(self._log_value)
+        return self._value
 
     def update(self, observed: float) -> bool:
         """Learn from one measurement; returns False when it was unusable (ignored)."""
@@ -127,6 +128,7 @@ class RobustEstimate:
         if self.observations <= self._recent.maxlen:
             # Cold start: the running median of everything seen so far.
             self._log_value = statistics.median(self._recent)
+            self._value = math.exp(self._log_value)
             self._outside_gate = 0
             return True
         innovation = log_observed - self._log_value
@@ -138,6 +140,7 @@ class RobustEstimate:
             if self._outside_gate >= self._confirm:
                 self._log_value = statistics.median(self._recent)
                 self._outside_gate = 0
+        self._value = math.exp(self._log_value)
         return True
 
 

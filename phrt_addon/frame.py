@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import heuristic, shading
-from .cost_model import CostModel
+from .cost_model import CostModel, FrameStats
 from .gbuffer import GBuffer, element_pixel_stats
 from .scene import SceneSnapshot, transform_points
 from .shadowmap import shadow_visibility
@@ -82,8 +82,7 @@ class FrameRenderer:
         height, width = gbuffer.height, gbuffer.width
         materials = shading.MaterialTable(snapshot.materials)
         if self.cost_model is None:
-            self.cost_model = CostModel(cost_mode=settings.cost_mode)
-        self.cost_model.cost_mode = settings.cost_mode
+            self.cost_model = CostModel()
 
         # -- raster shadows (shadow-map lookups) ------------------------------
         start = _timer()
@@ -119,13 +118,14 @@ class FrameRenderer:
             refractions=np.array([e.refractions for e in snapshot.elements], bool),
             rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint, settings.max_bounces),
             frame_px=width * height,
+            near_clip=snapshot.camera.clip_start,
         )
         selection = heuristic.select(
             frame_elements, self.previous_selection,
             heuristic.SelectionSettings(budget_ms=settings.budget_ms, selection_weight=settings.selection_weight,
                                         max_area_fraction=settings.max_area_fraction, mode=mode,
                                         cost_mode=settings.cost_mode),
-            self.cost_model)
+            self.cost_model, frame=snapshot.frame)
         selected = np.asarray(selection.selected, bool)
         select_ms = _ms(start)
 
@@ -147,13 +147,14 @@ class FrameRenderer:
         composite_ms = _ms(start)
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
-        self.cost_model.observe(heuristic.FrameTimes(
-            raster_ms=raster_ms, select_ms=select_ms, composite_ms=composite_ms, trace_ms=trace_ms,
+        self.cost_model.observe(FrameStats(
+            raster_ms=raster_ms, select_ms=select_ms, composite_ms=composite_ms,
+            trace_ms=trace_ms if np.any(selected) else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
-                       "refractions": counters.refraction_ms, "upload": counters.upload_ms},
+                       "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,
                          "refractions": counters.refraction_rays},
-            element_rays=element_rays, selection=selection))
+            element_rays=element_rays), selection)
         self.previous_selection = {name: bool(flag) for name, flag in zip(frame_elements.names, selected)}
         self.frames_rendered += 1
         stats = {
@@ -175,17 +176,21 @@ class FrameRenderer:
     def _layer_samples(gbuffer, snapshot, materials):
         """Per covered pixel of each layer: flat index, world point, surface samples."""
         camera = snapshot.camera
-        origins, directions = camera.pixel_rays()
         layers = {}
         for name, layer in (("opaque", gbuffer.opaque), ("transparent", gbuffer.transparent)):
             flat = np.flatnonzero(layer.covered.ravel())
             position = layer.position.reshape(-1, 3)[flat].astype(np.float64)
             world = position + gbuffer.origin
-            view_dirs = directions.reshape(-1, 3)[flat]
+            # Positions are relative to the camera: the view ray is the position itself
+            # (perspective) or the camera axis (orthographic).
+            if camera.ortho:
+                view_dirs = np.broadcast_to(camera.forward, position.shape).copy()
+            else:
+                view_dirs = shading.normalize(position)
             material = np.clip(layer.material.ravel()[flat], 0, len(materials.ior) - 1)
             normal = shading.normalize(layer.normal.reshape(-1, 3)[flat].astype(np.float64))
             # A normal facing away from the viewer (interpolation at silhouettes) is flipped.
-            back = np.sum(normal * view_dirs, axis=1) > 0
+            back = shading.dot(normal, view_dirs) > 0
             normal[back] *= -1.0
             surface = shading.SurfaceSamples(
                 position=position, normal=normal, view=-view_dirs,

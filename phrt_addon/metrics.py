@@ -18,9 +18,10 @@ Every image enters as linear HDR RGB, float32, shape (H, W, 3), top row first.
   first view layer), a plain RGB(A) EXR, or an 8-bit sRGB PNG.  Blender 5.0
   writes one EXR part per pass, in view layer order, named
   ``<view layer>.<pass>`` with channels ``<view layer>.<pass>.<R|G|B|A|X|Y|Z>``
-  (e.g. part ``ViewLayer.Combined``, channel ``ViewLayer.Combined.R``); 4.x
-  wrote the same channels in one part, where EXR sorts channels by name, so
-  there the alphabetically first view layer wins.
+  (e.g. part ``ViewLayer.Combined``, channel ``ViewLayer.Combined.R``).  A
+  single-part file with the same channel names (the older layout) is read
+  too; EXR sorts a part's channels by name, so there the alphabetically first
+  view layer wins.
 
 Non-finite pixels are replaced (NaN by 0, +-Inf by +-65504, the float16
 limit) so that every metric is finite.  Metrics are computed after rendering,
@@ -114,14 +115,20 @@ def image_errors(reference, test):
 
 
 def read_image(path):
-    """Linear RGB float32 (H, W, 3), top row first, from a .exr or a .png file."""
+    """Linear RGB float32 (H, W, 3), top row first, from a .exr or a .png file.
+
+    Raises ``ValueError`` for an unsupported, missing or unreadable file.
+    """
     path = Path(path)
+    readers = {".exr": _read_exr, ".png": _read_png}
     suffix = path.suffix.lower()
-    if suffix == ".exr":
-        return _read_exr(path)
-    if suffix == ".png":
-        return _read_png(path)
-    raise ValueError(f"{path}: unsupported image type {suffix!r} (use .exr or .png)")
+    if suffix not in readers:
+        raise ValueError(f"{path}: unsupported image type {suffix!r} (use .exr or .png)")
+    try:
+        return readers[suffix](path)
+    except (OSError, RuntimeError, SyntaxError) as error:
+        # OpenEXR raises RuntimeError, Pillow SyntaxError for a damaged file.
+        raise ValueError(f"{path}: cannot read the image ({error})") from error
 
 
 def _rgb_prefixes(names):

@@ -22,7 +22,8 @@ else the group's raytrace run.  Frames are matched by frame number; images are
 with ``--images none``) gets its timings in the report but no error.
 
 Metrics run here, long after rendering, never inside a timed region.  Plots
-use matplotlib's Agg backend.  No ``bpy``.
+are matplotlib Figures saved by the Agg canvas (no pyplot, no global backend
+switch).  No ``bpy``.
 """
 import csv
 import html
@@ -160,7 +161,7 @@ def _unique_labels(runs):
             run.label = f"{run.run_dir.parent.name}/{name}"
 
 
-def _references(runs, groups, reference):
+def _references(groups, reference):
     """{group: reference Run or None}."""
     chosen = {}
     if reference is not None:
@@ -204,7 +205,7 @@ def _measure_group(members, reference):
                    and not results[id(run)].note]
         if reference_path is None or not pending:
             continue
-        reference_image = metrics.read_image(reference_path)
+        reference_image = metrics.read_image(reference_path)  # unreadable: ValueError for the user
         for run in pending:
             try:
                 errors = metrics.image_errors(reference_image, metrics.read_image(run.image(frame)))
@@ -245,7 +246,7 @@ def build_report(run_dirs, reference=None, out_dir="out/report"):
     groups = {}
     for run in runs:
         groups.setdefault(run.group, []).append(run)
-    references = _references(runs, groups, reference_run)
+    references = _references(groups, reference_run)
 
     errors = {}
     for group, members in groups.items():
@@ -278,67 +279,67 @@ def _write_errors_csv(path, runs, errors):
                 writer.writerow([runlog.format_value(values[key]) for key in ERROR_COLUMNS])
 
 
-def _plot_error_vs_time(path, groups, errors):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def _figure(**kwargs):
+    """A matplotlib Figure drawn by the Agg canvas, without pyplot's global state."""
+    from matplotlib.figure import Figure
 
-    figure, axes = plt.subplots(figsize=(8, 5.5))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    plotted = False
-    largest_time, largest_error = 1.0, 0.0
-    for index, (group, members) in enumerate(groups.items()):
-        points = [(run, run.mean("total_ms"), errors[id(run)].mean("flip")) for run in members]
-        points = [(run, time, error) for run, time, error in points
-                  if time is not None and error is not None]
-        if not points:
-            continue
-        plotted = True
-        color = colors[index % len(colors)]
-        times = np.array([time for _, time, _ in points])
-        flips = np.array([error for _, _, error in points])
-        largest_time = max(largest_time, float(times.max()))
-        largest_error = max(largest_error, float(flips.max()))
-        axes.scatter(times, flips, color=color, zorder=3, label=f"{group[0]} / {group[1]}")
-        # Neighbours' labels alternate above and below their points (never below the axis).
-        for rank, (run, time, error) in enumerate(sorted(points, key=lambda p: (p[1], p[2]))):
-            below = rank % 2 == 1 and error > 0.15 * flips.max()
-            axes.annotate(f"{run.label}\n({run.mode.lower()})", (time, error), fontsize=8,
-                          textcoords="offset points", xytext=(6, -22 if below else 6))
-        front = pareto_front(times, flips)
-        axes.plot(times[front], flips[front], color=color, drawstyle="steps-post",
-                  linestyle="--", linewidth=1.2, label=f"Pareto front, {group[1]}")
-        budgets = {run.summary.get("budget_ms") for run, _, _ in points if run.mode == "HYBRID"}
-        for budget in sorted(b for b in budgets if b):
-            axes.axvline(budget, color=color, linestyle=":", linewidth=1.0)
-            axes.annotate(f"budget {budget:g} ms", (budget, 0.0), xycoords=("data", "axes fraction"),
-                          xytext=(3, 4), textcoords="offset points", fontsize=8, color=color,
-                          rotation=90, va="bottom")
-    if not plotted:
-        axes.text(0.5, 0.5, "no error measured (no reference images)", ha="center",
-                  va="center", transform=axes.transAxes)
-    axes.set_xlabel("mean frame time (ms)")
-    axes.set_ylabel("mean LDR-FLIP against the reference (lower is better)")
-    axes.set_title("Error against frame time")
-    # Room on the right and at the top for the point labels.
-    axes.set_xlim(0.0, 1.3 * largest_time)
-    axes.set_ylim(0.0, 1.25 * largest_error if largest_error > 0 else 1.0)
-    axes.grid(True, alpha=0.3)
-    if plotted:
-        axes.legend(fontsize=8, loc="upper right")
+    return Figure(**kwargs)
+
+
+def _plot_error_vs_time(path, groups, errors):
+    """One panel per (scene, path): errors of different paths do not compare."""
+    columns = min(2, len(groups))
+    rows = -(-len(groups) // columns)
+    figure = _figure(figsize=(8 * columns, 5.5 * rows))
+    panels = figure.subplots(rows, columns, squeeze=False).ravel()
+    for axes in panels[len(groups):]:
+        axes.set_visible(False)
+    for axes, (group, members) in zip(panels, groups.items()):
+        _plot_error_vs_time_panel(axes, group, members, errors)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
-    plt.close(figure)
+
+
+def _plot_error_vs_time_panel(axes, group, members, errors):
+    axes.set_title(f"{group[0]} / {group[1]}: error against frame time")
+    axes.set_xlabel("mean frame time (ms)")
+    axes.set_ylabel("mean LDR-FLIP against the reference (lower is better)")
+    axes.grid(True, alpha=0.3)
+    points = [(run, run.mean("total_ms"), errors[id(run)].mean("flip")) for run in members]
+    points = sorted(((run, time, error) for run, time, error in points
+                     if time is not None and error is not None), key=lambda p: (p[1], p[2]))
+    if not points:
+        axes.text(0.5, 0.5, "no error measured for this path\n(see the error table)",
+                  ha="center", va="center", transform=axes.transAxes)
+        return
+    times = np.array([time for _, time, _ in points])
+    flips = np.array([error for _, _, error in points])
+    axes.scatter(times, flips, color="tab:blue", zorder=3, label="run")
+    # Neighbours' labels alternate above and below their points (never below the axis).
+    for rank, (run, time, error) in enumerate(points):
+        below = rank % 2 == 1 and error > 0.15 * flips.max()
+        axes.annotate(f"{run.label}\n({run.mode.lower()})", (time, error), fontsize=8,
+                      textcoords="offset points", xytext=(6, -22 if below else 6))
+    front = pareto_front(times, flips)
+    axes.plot(times[front], flips[front], color="tab:blue", drawstyle="steps-post",
+              linestyle="--", linewidth=1.2, label="Pareto front")
+    budgets = sorted({run.summary.get("budget_ms") for run, _, _ in points
+                      if run.mode == "HYBRID" and run.summary.get("budget_ms")})
+    for budget in budgets:
+        axes.axvline(budget, color="tab:red", linestyle=":", linewidth=1.0)
+        axes.annotate(f"budget {budget:g} ms", (budget, 0.0), xycoords=("data", "axes fraction"),
+                      xytext=(3, 4), textcoords="offset points", fontsize=8, color="tab:red",
+                      rotation=90, va="bottom")
+    # Room on the right and at the top for the point labels.
+    axes.set_xlim(0.0, 1.3 * max(float(times.max()), *budgets, 1.0))
+    axes.set_ylim(0.0, 1.25 * float(flips.max()) if flips.max() > 0 else 1.0)
+    axes.legend(fontsize=8, loc="upper right")
 
 
 def _plot_timeline(path, groups):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axes = plt.subplots(2 * len(groups), 1, figsize=(10, 5.5 * len(groups)),
-                                sharex=False, squeeze=False,
-                                gridspec_kw={"height_ratios": [2, 1] * len(groups)})
+    figure = _figure(figsize=(10, 5.5 * len(groups)))
+    axes = figure.subplots(2 * len(groups), 1, squeeze=False,
+                           gridspec_kw={"height_ratios": [2, 1] * len(groups)})
     for index, (group, members) in enumerate(groups.items()):
         time_axes, selected_axes = axes[2 * index, 0], axes[2 * index + 1, 0]
         budgeted = [run for run in members if run.mode == "HYBRID"] or members[:1]
@@ -365,11 +366,12 @@ def _plot_timeline(path, groups):
         selected_axes.set_xlabel("frame")
         selected_axes.set_ylim(bottom=0.0)
         selected_axes.yaxis.get_major_locator().set_params(integer=True)
+        selected_axes.xaxis.get_major_locator().set_params(integer=True)
+        time_axes.xaxis.get_major_locator().set_params(integer=True)
         selected_axes.grid(True, alpha=0.3)
         selected_axes.sharex(time_axes)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
-    plt.close(figure)
 
 
 def _ms(value):

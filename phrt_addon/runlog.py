@@ -246,13 +246,14 @@ class RunLog:
         if missing:
             raise ValueError(f"summary.json needs {missing} from the caller")
         self._close_files()
-        summary = summarize(self._frame_rows, self._selection_states)
-        summary.update({key: value for key, value in summary_extra.items()})
         first = self._frame_rows[0] if self._frame_rows else {}
-        summary.setdefault("mode", first.get("mode"))
-        summary.setdefault("budget_ms", first.get("budget_ms"))
+        summary = {"scene": summary_extra["scene"], "path": summary_extra["path"],
+                   "mode": first.get("mode"), "resolution": summary_extra["resolution"],
+                   "budget_ms": first.get("budget_ms")}
+        summary.update(summarize(self._frame_rows, self._selection_states))
         summary["non_finite_values_dropped"] = self._frames.non_finite + self._selection.non_finite
-        summary.setdefault("machine", machine_info())
+        summary["machine"] = machine_info()
+        summary.update(summary_extra)
         summary = _round_json(_json_safe(summary))
         path = self.run_dir / SUMMARY_JSON
         temporary = path.with_suffix(".json.tmp")

@@ -28,9 +28,10 @@ INV_PI = 1.0 / np.pi
 
 @dataclass
 class SurfaceSamples:
-    """N shading points (whole arrays, float64 unless noted)."""
+    """N shading points (whole arrays).  Terms every light needs (F0, diffuse weight,
+    GGX alpha, n.v) are computed once here instead of once per light."""
 
-    position: np.ndarray  # (N,3) world, relative to ``origin``
+    position: np.ndarray  # (N,3) world, relative to the caller's origin
     normal: np.ndarray  # (N,3) unit, facing the viewer
     view: np.ndarray  # (N,3) unit, from the surface towards the viewer
     albedo: np.ndarray  # (N,3)
@@ -40,8 +41,20 @@ class SurfaceSamples:
     ior: np.ndarray  # (N,)
     emission: np.ndarray  # (N,3)
 
+    def __post_init__(self):
+        self.f0 = specular_f0(self.albedo, self.metallic, self.ior)
+        self.diffuse_weight = (1.0 - self.metallic) * (1.0 - self.transmission)
+        self.diffuse_color = self.albedo * (self.diffuse_weight * INV_PI)[:, None]
+        self.alpha = np.maximum(self.roughness, MIN_ROUGHNESS) ** 2
+        self.n_dot_v = np.clip(dot(self.normal, self.view), 1e-4, 1.0)
+
     def __len__(self):
         return len(self.position)
+
+
+def dot(a, b):
+    """Row-wise dot product of (N,3) arrays."""
+    return np.einsum("ij,ij->i", a, b)
 
 
 class MaterialTable:
@@ -76,7 +89,10 @@ class MaterialTable:
 
 
 def normalize(vectors):
-    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    vectors = np.asarray(vectors)
+    if vectors.ndim == 1:
+        return vectors / max(float(np.sqrt(np.dot(vectors, vectors))), 1e-30)
+    length = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))[..., None]
     return vectors / np.maximum(length, 1e-30)
 
 
@@ -108,13 +124,13 @@ def fresnel_dielectric(cos_incident, eta):
 
 def reflect(incident, normal):
     """Mirror ``incident`` (pointing towards the surface) about ``normal``."""
-    return incident - 2.0 * np.sum(incident * normal, axis=-1, keepdims=True) * normal
+    return incident - (2.0 * dot(incident, normal))[:, None] * normal
 
 
 def refract(incident, normal, eta):
     """Snell refraction of unit ``incident`` through a surface with unit ``normal`` facing
     the incident side; ``eta`` = n_incident / n_transmitted.  Returns (direction, total_internal_reflection)."""
-    cos_i = -np.sum(incident * normal, axis=-1)
+    cos_i = -dot(incident, normal)
     sin2_t = eta ** 2 * np.clip(1.0 - cos_i ** 2, 0.0, 1.0)
     total = sin2_t > 1.0
     cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
@@ -125,27 +141,25 @@ def refract(incident, normal, eta):
 
 def brdf_cosine(surface: SurfaceSamples, light_dir):
     """BRDF times cos(theta_light): (N,3), for unit ``light_dir`` (surface to light)."""
-    n, v, l = surface.normal, surface.view, light_dir
-    n_dot_l = np.sum(n * l, axis=-1)
-    n_dot_v = np.clip(np.sum(n * v, axis=-1), 1e-4, 1.0)
+    n_dot_l = dot(surface.normal, light_dir)
     lit = n_dot_l > 0.0
     n_dot_l = np.clip(n_dot_l, 0.0, 1.0)
-    h = normalize(v + l)
-    n_dot_h = np.clip(np.sum(n * h, axis=-1), 0.0, 1.0)
-    v_dot_h = np.clip(np.sum(v * h, axis=-1), 0.0, 1.0)
-    alpha = np.maximum(surface.roughness, MIN_ROUGHNESS) ** 2
-    alpha2 = alpha ** 2
-    denom = n_dot_h ** 2 * (alpha2 - 1.0) + 1.0
-    distribution = alpha2 / np.maximum(np.pi * denom ** 2, 1e-30)
-    k = alpha / 2.0
-    geometry = (n_dot_l / np.maximum(n_dot_l * (1 - k) + k, 1e-30)) * (n_dot_v / (n_dot_v * (1 - k) + k))
-    f0 = specular_f0(surface.albedo, surface.metallic, surface.ior)
-    fresnel = fresnel_schlick(f0, v_dot_h)
-    specular = fresnel * (distribution * geometry / np.maximum(4.0 * n_dot_l * n_dot_v, 1e-4))[:, None]
-    diffuse_weight = (1.0 - surface.metallic) * (1.0 - surface.transmission)
-    diffuse = surface.albedo * (diffuse_weight * INV_PI)[:, None] * (1.0 - fresnel)
-    result = (diffuse + specular) * n_dot_l[:, None]
-    return np.where(lit[:, None], result, 0.0)
+    half = surface.view + light_dir
+    half /= np.maximum(np.sqrt(dot(half, half)), 1e-12)[:, None]
+    n_dot_h = np.clip(dot(surface.normal, half), 0.0, 1.0)
+    v_dot_h = np.clip(dot(surface.view, half), 0.0, 1.0)
+    alpha = surface.alpha
+    alpha2 = alpha * alpha
+    denom = n_dot_h * n_dot_h * (alpha2 - 1.0) + 1.0
+    k = alpha * 0.5
+    n_dot_v = surface.n_dot_v
+    # D * G / (4 n.l n.v) with the n.l of G cancelled against the denominator.
+    specular_scale = alpha2 / np.maximum(np.pi * denom * denom, 1e-30) \
+        / np.maximum(n_dot_l * (1 - k) + k, 1e-30) / (n_dot_v * (1 - k) + k) * 0.25
+    fresnel = fresnel_schlick(surface.f0, v_dot_h)
+    result = surface.diffuse_color * (1.0 - fresnel) + fresnel * specular_scale[:, None]
+    result *= (n_dot_l * lit)[:, None]
+    return result
 
 
 def light_incidence(light, position, origin):
@@ -155,10 +169,10 @@ def light_incidence(light, position, origin):
     n = len(position)
     if light.kind == "SUN":
         direction = -normalize(np.asarray(light.direction, dtype=np.float64))
-        return np.broadcast_to(direction, (n, 3)).copy(), np.full(n, np.inf), np.broadcast_to(color, (n, 3)).copy()
+        return np.broadcast_to(direction, (n, 3)), np.full(n, np.inf), np.broadcast_to(color, (n, 3))
     light_position = np.asarray(light.position, dtype=np.float64) - origin
     to_light = light_position - position
-    distance = np.linalg.norm(to_light, axis=-1)
+    distance = np.sqrt(dot(to_light, to_light))
     safe = np.maximum(distance, 1e-6)
     direction = to_light / safe[:, None]
     axis = normalize(np.asarray(light.direction, dtype=np.float64))
@@ -182,11 +196,8 @@ def light_incidence(light, position, origin):
 def ambient(surface: SurfaceSamples, world_color):
     """Uniform-environment lighting: diffuse ambient plus the raster stand-in for reflections."""
     world = np.asarray(world_color, dtype=np.float64)[None, :]
-    n_dot_v = np.clip(np.sum(surface.normal * surface.view, axis=-1), 0.0, 1.0)
-    f0 = specular_f0(surface.albedo, surface.metallic, surface.ior)
-    fresnel = environment_fresnel(f0, n_dot_v, surface.roughness)
-    diffuse_weight = (1.0 - surface.metallic) * (1.0 - surface.transmission)
-    diffuse = surface.albedo * diffuse_weight[:, None] * (1.0 - fresnel) * world
+    fresnel = environment_fresnel(surface.f0, surface.n_dot_v, surface.roughness)
+    diffuse = surface.albedo * surface.diffuse_weight[:, None] * (1.0 - fresnel) * world
     return diffuse, fresnel
 
 

@@ -45,6 +45,10 @@ class ShadowMap:
     view: LightView
     depth: np.ndarray  # (size, size) float32 window depth in [0, 1], row 0 at the bottom
 
+    def __post_init__(self):
+        # Linear light-space depth, computed once: maps are cached across frames.
+        self.linear = _linear_depth(self.view, self.depth.astype(np.float64)).astype(np.float32).ravel()
+
 
 def look_at(forward, up_hint=(0.0, 0.0, 1.0)) -> np.ndarray:
     """View rotation (4x4) looking along ``forward`` (camera -Z) from the origin."""
@@ -134,7 +138,7 @@ def _lookup_one(shadow_map: ShadowMap, points, normals):
     relative = points - view.origin
     view_space = relative @ view.view[:3, :3].T
     axis_depth = -view_space[:, 2]
-    texel = view.texel_angle if view.ortho else view.texel_angle * np.maximum(axis_depth, view.near)
+    texel = np.full(len(points), view.texel_angle) if view.ortho else view.texel_angle * np.maximum(axis_depth, view.near)
     offset_points = relative + normals * (NORMAL_OFFSET_TEXELS * texel)[:, None]
     clip = offset_points @ view.view_proj_relative[:3, :3].T + view.view_proj_relative[:3, 3]
     w = offset_points @ view.view_proj_relative[3, :3] + view.view_proj_relative[3, 3]
@@ -150,13 +154,18 @@ def _lookup_one(shadow_map: ShadowMap, points, normals):
     fu, fv = u - u0, v - v0
     u0 = u0.astype(np.int64)
     v0 = v0.astype(np.int64)
-    lit = np.zeros(len(points))
-    bias = DEPTH_BIAS_TEXELS * texel
-    for du, dv, weight in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
-        x = np.clip(u0 + du, 0, size - 1)
-        y = np.clip(v0 + dv, 0, size - 1)
-        occluder = _linear_depth(view, shadow_map.depth[y, x].astype(np.float64))
-        lit += weight * (receiver_depth <= occluder + bias)
+    lit = np.zeros(len(points), np.float32)
+    threshold = (receiver_depth - DEPTH_BIAS_TEXELS * texel).astype(np.float32)
+    x0 = np.clip(u0, 0, size - 1)
+    x1 = np.clip(u0 + 1, 0, size - 1)
+    row0 = np.clip(v0, 0, size - 1) * size
+    row1 = np.clip(v0 + 1, 0, size - 1) * size
+    fu = fu.astype(np.float32)
+    fv = fv.astype(np.float32)
+    linear = shadow_map.linear
+    for index, weight in ((row0 + x0, (1 - fu) * (1 - fv)), (row0 + x1, fu * (1 - fv)),
+                          (row1 + x0, (1 - fu) * fv), (row1 + x1, fu * fv)):
+        lit += weight * (threshold <= linear[index])
     return np.where(inside, lit, np.nan)
 
 

@@ -197,3 +197,11 @@ def test_png_written_by_matplotlib_is_linearised(tmp_path):
 def test_unknown_image_type_is_refused(tmp_path):
     with pytest.raises(ValueError, match="unsupported"):
         metrics.read_image(tmp_path / "frame.jpg")
+
+
+@pytest.mark.parametrize("name", ["damaged.exr", "damaged.png", "missing.exr"])
+def test_unreadable_image_is_a_value_error(tmp_path, name):
+    if name.startswith("damaged"):
+        (tmp_path / name).write_bytes(b"not an image")
+    with pytest.raises(ValueError, match="cannot read"):
+        metrics.read_image(tmp_path / name)

@@ -186,6 +186,16 @@ def test_errors_only_against_the_reference_of_the_same_path(tmp_path):
     assert line.endswith("| – | – | – | no reference run for this path: error not measured |")
 
 
+def test_damaged_frame_image_is_noted_not_fatal(tmp_path):
+    reference = make_run(tmp_path, "raytrace", "RAYTRACE", 400.0)
+    hybrid = make_run(tmp_path, "hybrid", "HYBRID", 100.0, image_of=hybrid_frame)
+    (hybrid / "frames" / "0002.exr").write_bytes(b"damaged")
+    files = report.build_report([hybrid, reference], out_dir=tmp_path / "report")
+    line = row_of(section(files.markdown.read_text(), "Error against the reference"), "| hybrid |")
+    assert "not compared:" in line and "0002.exr" in line
+    assert read_errors(files.errors_csv) == []
+
+
 def test_unfinished_run_dir_is_refused(tmp_path):
     with RunLog(tmp_path / "cancelled") as log:
         log.add_frame({"frame": 1, "mode": "HYBRID", "total_ms": 1.0, "raster_ms": 1.0,
