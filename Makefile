@@ -6,7 +6,6 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
-BLENDER_EXT := $(VENV)/lib/python3.11/site-packages/bpy/5.0/scripts/addons_core/bl_pkg/cli/blender_ext.py
 
 .PHONY: demo test test-fast bench extension scenes clean
 
@@ -37,10 +36,7 @@ scenes: $(STAMP)
 
 # One extension zip per platform, with the wheels it needs (never committed).
 extension: $(STAMP)
-	$(PY) tools/fetch_wheels.py --dest wheels
-	$(PY) $(BLENDER_EXT) validate .
-	mkdir -p dist
-	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist --split-platforms
+	$(PY) tools/build_extension.py --platforms all --out dist
 
 clean:
 	rm -rf out dist wheels .pytest_cache

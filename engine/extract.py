@@ -99,6 +99,14 @@ def _image_pixels(image, problems):
         return None, None
 
 
+def _uses_nodes(datablock) -> bool:
+    """Blender 5.0 always uses node trees (``use_nodes`` is deprecated); 4.x may not."""
+    import bpy
+    if bpy.app.version >= (5, 0, 0):
+        return datablock.node_tree is not None
+    return bool(datablock.use_nodes)
+
+
 def _socket_value(node, name, default):
     socket = node.inputs.get(name)
     if socket is None:
@@ -120,7 +128,7 @@ def read_material(material, problems) -> Material:
         metallic=float(material.metallic),
         roughness=float(material.roughness),
     )
-    tree = material.node_tree if material.use_nodes else None
+    tree = material.node_tree if _uses_nodes(material) else None
     if tree is None:
         return result
     principled = next((node for node in tree.nodes if node.type == "BSDF_PRINCIPLED"), None)
@@ -301,7 +309,7 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
     world_color = (0.05, 0.05, 0.05)
     if world is not None:
         world_color = tuple(world.color[:3])
-        if world.use_nodes and world.node_tree is not None:
+        if _uses_nodes(world) and world.node_tree is not None:
             background = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
             if background is not None:
                 color = background.inputs["Color"].default_value

@@ -106,6 +106,7 @@ class FinalRender:
         engine.update_stats("PHRT", "Raster")
         start = time.perf_counter()
         shadow_maps = {}
+        shadow_render_ms = 0.0
         with raster.RasterPass(snapshot) as raster_pass:
             gbuffer = raster_pass.render_gbuffer()
             if snapshot.meshes:
@@ -118,7 +119,9 @@ class FinalRender:
                     keys.add(key)
                     maps = raster.SHADOW_MAP_CACHE.get(key)
                     if maps is None:
+                        begin = time.perf_counter()
                         maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
+                        shadow_render_ms += (time.perf_counter() - begin) * 1000.0
                         raster.SHADOW_MAP_CACHE.put(key, maps)
                     shadow_maps[index] = maps
                 raster.SHADOW_MAP_CACHE.retain(keys)
@@ -128,7 +131,8 @@ class FinalRender:
             return
 
         engine.update_stats("PHRT", "Selection, tracing, compositing")
-        result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms)
+        result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms,
+                                 raster_setup_ms=min(shadow_render_ms + upload_ms, raster_ms))
         result.stats["extract_ms"] = extract_ms
         result.stats["gpu_upload_ms"] = upload_ms
         self._write(result, width, height)

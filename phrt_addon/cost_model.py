@@ -195,6 +195,10 @@ class CostModel:
         self._paper_ms_per_cost = self._estimate(paper_ms_per_cost_prior)
         self._residual = self._estimate(1.0)
         self._rays_ratio: dict[str, RobustEstimate] = {}
+        # The learned ratios as an array in the last frame's element order (the
+        # engine keeps the order stable, so lookups by name are rarely needed).
+        self._rays_ratio_names: list[str] = []
+        self._rays_ratio_values = np.ones(0)
 
     def _estimate(self, prior: float, floor: float = 0.0) -> RobustEstimate:
         return RobustEstimate(prior, floor=floor, **self._estimator_settings)
@@ -241,9 +245,13 @@ class CostModel:
     def _rays_ratio_of(self, names: Sequence[str]) -> np.ndarray:
         if not self._rays_ratio:
             return np.ones(len(names))
-        lookup = self._rays_ratio.get
-        return np.fromiter(((estimate.value if estimate is not None else 1.0) for estimate in map(lookup, names)),
-                           dtype=np.float64, count=len(names))
+        if self._rays_ratio_names != names:
+            lookup = self._rays_ratio.get
+            self._rays_ratio_values = np.fromiter(
+                ((estimate.value if estimate is not None else 1.0) for estimate in map(lookup, names)),
+                dtype=np.float64, count=len(names))
+            self._rays_ratio_names = list(names)
+        return self._rays_ratio_values
 
     def _element_ms_per_ray(self, elements) -> np.ndarray:
         """Cost per ray of each element's effects: the per-effect costs weighted by
@@ -330,9 +338,12 @@ class CostModel:
         elements = result.elements
         expected_rays = elements.area_px * elements.rays_per_pixel
         usable = np.flatnonzero(selected & (expected_rays > 0) & (element_rays > 0))
+        in_cached_order = self._rays_ratio_names == result.names
         for index in usable.tolist():
             name = result.names[index]
             estimate = self._rays_ratio.get(name)
             if estimate is None:
                 estimate = self._rays_ratio[name] = self._estimate(1.0)
             estimate.update(element_rays[index] / expected_rays[index])
+            if in_cached_order:
+                self._rays_ratio_values[index] = estimate.value

@@ -76,7 +76,10 @@ class FrameRenderer:
             self.trace_scene = None
 
     # ------------------------------------------------------------------
-    def render(self, snapshot: SceneSnapshot, gbuffer: GBuffer, shadow_maps: dict, raster_ms: float) -> FrameResult:
+    def render(self, snapshot: SceneSnapshot, gbuffer: GBuffer, shadow_maps: dict, raster_ms: float,
+               raster_setup_ms: float = 0.0) -> FrameResult:
+        """``raster_setup_ms``: the one-time part of ``raster_ms`` (shader compiles, shadow maps drawn
+        anew): reported, but not taught to the cost model as a per-frame cost."""
         settings = snapshot.settings
         mode = settings.mode.upper()
         height, width = gbuffer.height, gbuffer.width
@@ -147,9 +150,10 @@ class FrameRenderer:
         composite_ms = _ms(start)
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
+        # One-time work (Embree builds, shader compiles, new shadow maps) is not a per-frame cost.
         self.cost_model.observe(FrameStats(
-            raster_ms=raster_ms, select_ms=select_ms, composite_ms=composite_ms,
-            trace_ms=trace_ms if np.any(selected) else None,
+            raster_ms=max(raster_ms - raster_setup_ms, 0.0), select_ms=select_ms, composite_ms=composite_ms,
+            trace_ms=max(trace_ms - counters.upload_ms, 0.0) if np.any(selected) else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,
@@ -166,6 +170,7 @@ class FrameRenderer:
             "n_selected": int(np.sum(selected)), "rays": counters.rays,
             "shadow_rays": counters.shadow_rays, "reflection_rays": counters.reflection_rays,
             "refraction_rays": counters.refraction_rays, "upload_ms": counters.upload_ms,
+            "setup_ms": raster_setup_ms + counters.upload_ms,
             "time_left_ms": float(selection.time_left_ms), "triangles": snapshot.n_triangles,
         }
         return FrameResult(passes=passes, stats=stats, selection=selection,

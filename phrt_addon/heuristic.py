@@ -96,6 +96,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from functools import cached_property
+from itertools import compress
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -147,7 +148,10 @@ class FrameElements:
     ``rays_per_pixel`` rays one pixel of the element costs with its effects
     ``near_clip``     the camera's clip_start, the near-plane clamp of D
     Optional arrays default to: candidate True, centre 0, distance 1, K 1, Q 1,
-    no effects, 1 ray per pixel.
+    no effects, 1 ray per pixel.  Sanitising: pixel counts are clipped to
+    [0, frame_px]; a NaN K counts as 0, a NaN Q as 1, NaN rays as 0; K, Q and
+    rays are clipped to [0, a large finite maximum]; a near_clip that is not a
+    positive finite number falls back to NEAR_CLIP_DISTANCE.
     """
 
     names: Sequence[str]
@@ -165,7 +169,7 @@ class FrameElements:
     near_clip: float = NEAR_CLIP_DISTANCE
 
     def __post_init__(self):
-        self.names = [str(name) for name in self.names]
+        self.names = list(map(str, self.names))
         n = len(self.names)
         if len(set(self.names)) != n:
             raise ValueError("element names must be unique (the previous selection is keyed by name)")
@@ -188,8 +192,8 @@ class FrameElements:
         if centre.shape != (n, 2):
             raise ValueError(f"centre_ndc has shape {centre.shape}, expected ({n}, 2)")
         self.centre_ndc = centre
-        near = float(np.nan_to_num(self.near_clip, nan=NEAR_CLIP_DISTANCE, posinf=NEAR_CLIP_DISTANCE))
-        self.near_clip = near if near >= MIN_NEAR_CLIP_DISTANCE else NEAR_CLIP_DISTANCE
+        near = float(self.near_clip)
+        self.near_clip = max(near, MIN_NEAR_CLIP_DISTANCE) if 0 < near < FAR_DISTANCE else NEAR_CLIP_DISTANCE
         self.distance = column("distance", 1.0, np.float64).astype(np.float64)
         self.priority = _finite(column("priority", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_PRIORITY)
         self.rt_cost = _finite(column("rt_cost", 1.0, np.float64), nan=1.0, low=0.0, high=MAX_RT_COST)
@@ -263,6 +267,8 @@ def previously_selected_mask(names: Sequence[str], previous_selection) -> np.nda
     if previous_selection is None:
         return np.zeros(n, dtype=bool)
     if isinstance(previous_selection, SelectionResult):
+        if previous_selection.names == names:  # the usual case: a stable element order
+            return previous_selection.selected.copy()
         chosen = previous_selection.selected_names()
     elif isinstance(previous_selection, Mapping):
         chosen = {str(name) for name, was_selected in previous_selection.items() if was_selected}
@@ -435,7 +441,7 @@ class SelectionResult:
 
     def selected_names(self) -> frozenset[str]:
         """The selection as names: next frame's S."""
-        return frozenset(self.names[index] for index in np.flatnonzero(self.selected).tolist())
+        return frozenset(compress(self.names, self.selected.tolist()))
 
     def columns(self, frame: int | None = None) -> dict[str, list]:
         """selection.csv as columns, in SELECTION_COLUMNS order (booleans as 0/1)."""

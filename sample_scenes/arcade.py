@@ -47,7 +47,7 @@ UPPER_STOREY = dict(base=GALLERY_TOP, plinth=0.6, plinth_h=0.2, radius=0.22, sha
                     capital_top=8.15, abacus=0.65, spring=8.3, band_top=ROOF_Z)
 
 OVER_AREA_PATH = "path2"
-OVER_AREA_FRAMES = (420, 480)
+OVER_AREA_FRAMES = (490, 620)
 OVER_AREA_ELEMENT = "MirrorSphere_Large"
 
 
@@ -287,4 +287,49 @@ def build(data: SceneData, rng: np.random.Generator) -> None:
     data.sky("ArcadeSky", (0.50, 0.62, 0.82), 0.8)
 
 
-PATHS = ()
+# Camera paths. Frame numbers in the looks and glances were set against
+# where the player is at that time (walking 1.4 m/s covers 2.3 m per 100 frames,
+# running 4.5 m/s 7.5 m).
+PATHS = (
+    PathSpec(
+        name="path1",
+        description="Walk (1.4 m/s) from the west aisle through the arcade and down the whole courtyard, "
+                    "looking left at the octahedrons, right at the large mirror sphere, up at the gallery, "
+                    "then at the torus and the large glass sphere as they pass.",
+        waypoints=((-16.0, 0.8), (-14.0, 0.3), (-12.0, 0.0), (-10.0, 0.6), (-7.5, 1.2), (-4.5, 1.2),
+                   (-2.0, 0.8), (0.5, 0.4), (3.5, 0.4), (6.5, 0.3), (9.0, 0.3), (10.5, 0.3)),
+        speeds=((1, WALK_MPS), (1000, WALK_MPS)),
+        glances=((1, 0, -4), (460, 0, -4), (520, 12, 24), (570, 12, 24), (620, 0, -4),
+                 (880, 0, -4), (920, 35, -6), (960, 35, -6), (1000, 0, -4)),
+        looks=(Look(110, 260, (-8.2, 2.9, 0.6)), Look(290, 440, (-5.0, -1.6, 1.2)),
+               Look(580, 700, (1.0, 2.5, 1.1)), Look(690, 820, (2.6, -2.3, 0.9), ramp=40)),
+    ),
+    PathSpec(
+        name="path2",
+        description="Walk (1.4 m/s) along the south aisle past the small glass sphere, through the arcade "
+                    "and slowly around the large mirror sphere at arm's length, looking into it (it fills "
+                    "over 40% of the frame), then run (4.5 m/s) east through the courtyard into the east aisle.",
+        waypoints=((-15.5, -6.5), (-12.0, -6.4), (-9.5, -6.3), (-7.8, -5.6), (-7.5, -4.5), (-7.4, -3.4),
+                   (-6.93, -2.30), (-7.02, -1.0), (-6.4, -0.05), (-5.3, 0.45), (-4.0, 0.45),
+                   (-1.5, 0.3), (2.0, 0.2), (5.5, 0.0), (8.0, 0.1), (10.3, 0.2),
+                   (12.0, 0.0), (14.0, 0.3), (15.3, 2.0), (15.2, 5.5), (12.0, 6.5), (6.0, 6.3)),
+        speeds=((1, WALK_MPS), (440, WALK_MPS), (470, 1.1), (640, 1.1), (700, RUN_MPS), (1000, RUN_MPS)),
+        glances=((1, 0, -4), (120, 0, -4), (170, 40, -2), (230, 40, -2), (280, 0, -4), (840, 0, -4),
+                 (870, -45, -6), (910, -45, -6), (950, 0, -4), (1000, 0, -4)),
+        looks=(Look(380, 660, (-5.0, -1.6, 1.1), ramp=40),),
+    ),
+    PathSpec(
+        name="path3",
+        description="Run (4.5 m/s) the loop of aisles: up the east aisle, west along the north aisle "
+                    "glancing left through the arches so the candidates sweep across the view, down the "
+                    "west aisle and east along the south aisle, then walk into the courtyard between the "
+                    "large mirror and glass spheres and look around.",
+        waypoints=((15.6, -5.8), (15.5, 0.0), (15.0, 5.6), (12.0, 6.4), (6.0, 6.2), (0.0, 6.4),
+                   (-6.0, 6.4), (-12.0, 6.4), (-15.0, 5.2), (-15.3, 0.0), (-15.0, -5.0), (-12.0, -6.3),
+                   (-6.0, -6.4), (-2.5, -6.1), (-1.5, -4.5), (-1.3, -2.0), (-1.0, -0.5), (-0.5, 1.0)),
+        speeds=((1, RUN_MPS), (885, RUN_MPS), (925, WALK_MPS), (975, 0.3), (1000, 0.0)),
+        glances=((1, 0, -4), (150, 0, -4), (200, 50, -6), (260, 50, -6), (300, 0, -4), (330, 55, -6),
+                 (420, 55, -6), (460, 0, -4), (640, 0, -4), (700, 50, -6), (760, 50, -6), (800, 0, -4),
+                 (930, 0, -4), (960, 50, 0), (1000, -30, 4)),
+    ),
+)

@@ -423,3 +423,37 @@ def leaf_cards(centres: np.ndarray, sizes: np.ndarray, rng: np.random.Generator,
     verts = np.stack((centres - along * length, centres - across * length * 0.45,
                       centres + along * length, centres + across * length * 0.45), axis=1).reshape(-1, 3)
     return Part(verts, quads=np.arange(4 * count, dtype=np.int32).reshape(count, 4), material=material)
+
+
+def ring_sector(inner: float, outer: float, z0: float, z1: float, angle0: float, angle1: float,
+                segments: int, material: int = 0) -> Part:
+    """A curved wall: the solid between radii ``inner`` and ``outer`` around
+    +Z, from height ``z0`` to ``z1`` and angle ``angle0`` to ``angle1``
+    (radians, counter-clockwise). A full turn gives a closed ring."""
+    full = abs(angle1 - angle0) >= 2 * math.pi - 1e-9
+    count = segments if full else segments + 1
+    angles = np.linspace(angle0, angle1, count, endpoint=not full)
+    # Section loop in (r, z), counter-clockwise seen from the -phi side.
+    section = np.array(((inner, z0), (outer, z0), (outer, z1), (inner, z1)))
+    c, s = np.cos(angles), np.sin(angles)
+    verts = np.empty((count, 4, 3))
+    verts[..., 0] = c[:, None] * section[None, :, 0]
+    verts[..., 1] = s[:, None] * section[None, :, 0]
+    verts[..., 2] = section[None, :, 1]
+    steps = count if full else count - 1
+    a = np.arange(steps)
+    b = (a + 1) % count
+    quads = []
+    for k in range(4):
+        k1 = (k + 1) % 4
+        quads.append(np.stack((a * 4 + k, a * 4 + k1, b * 4 + k1, b * 4 + k), axis=1))
+    if not full:
+        quads.append(np.array(((3, 2, 1, 0),)))
+        last = (count - 1) * 4
+        quads.append(np.array(((last, last + 1, last + 2, last + 3),)))
+    part = Part(verts.reshape(-1, 3), quads=np.concatenate(quads).astype(np.int32), material=material)
+    return part if signed_volume(part) > 0 else part.flipped()
+
+
+def ellipsoid(radii, segments: int = 32, rings: int = 16, material: int = 0) -> Part:
+    return uv_sphere(1.0, segments, rings, material).transformed(scale(*radii))

@@ -25,12 +25,14 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dest", default="wheels")
     parser.add_argument("--manifest", default=str(ROOT / "blender_manifest.toml"))
+    parser.add_argument("--only", default="", help="comma-separated wheel file names (default: all listed)")
     args = parser.parse_args(argv)
     dest = (ROOT / args.dest).resolve()
     dest.mkdir(parents=True, exist_ok=True)
     missing = []
+    only = set(filter(None, args.only.split(",")))
     for name, project, version, python_tag, platform in wheel_requests(pathlib.Path(args.manifest)):
-        if (dest / name).exists():
+        if (only and name not in only) or (dest / name).exists():
             continue
         subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--only-binary=:all:", "--no-deps",
                         "--platform", platform, "--python-version", python_tag[2:], "--implementation", "cp",
