@@ -39,6 +39,28 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
             self.report({"ERROR"}, message)
             self.error_set(message)
 
+    def view_update(self, context, depsgraph):
+        """Rendered shading: something changed; the next view_draw renders again."""
+        from . import viewport
+        try:
+            if getattr(self, "viewport", None) is None:
+                self.viewport = viewport.ViewportRender()
+            self.viewport.update(depsgraph)
+        except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
+            final.log_exception(error)
+            self.update_stats("PHRT", f"Error: {error}")
+
+    def view_draw(self, context, depsgraph):
+        """Rendered shading: draw PHRT's image of the viewport's view (see engine/viewport.py)."""
+        from . import viewport
+        try:
+            if getattr(self, "viewport", None) is None:
+                self.viewport = viewport.ViewportRender()
+            self.viewport.draw(self, context, depsgraph)
+        except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
+            final.log_exception(error)
+            self.update_stats("PHRT", f"Error: {error}")
+
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")

@@ -90,15 +90,12 @@ class FrameRenderer:
         # -- raster shadows (shadow-map lookups) ------------------------------
         start = _timer()
         layers = self._layer_samples(gbuffer, snapshot, materials)
+        # Per layer and light: the pixels the light reaches (facing it, non-negligible irradiance),
+        # its direction and irradiance there, and their visibility (shadow maps now, rays later).
         visibility = {}
         for layer_name, samples in layers.items():
-            visibility[layer_name] = []
-            for light_index, light in enumerate(snapshot.lights):
-                maps = shadow_maps.get(light_index) if light.cast_shadows else None
-                if maps and len(samples["world"]):
-                    visibility[layer_name].append(shadow_visibility(maps, samples["world"], samples["surface"].normal))
-                else:
-                    visibility[layer_name].append(np.ones(len(samples["world"])))
+            visibility[layer_name] = [light_terms(light, samples, shadow_maps.get(index))
+                                      for index, light in enumerate(snapshot.lights)]
         raster_ms = raster_ms + _ms(start)
 
         # -- selection --------------------------------------------------------
@@ -251,21 +248,23 @@ class FrameRenderer:
             points_trace = scene.to_trace(samples["world"])
             eps = ray_epsilon(points_trace, scene.extent)
             for light_index, light in enumerate(snapshot.lights):
-                if not light.cast_shadows:
+                terms = visibility[layer_name][light_index]
+                if not light.cast_shadows or len(terms.active) == 0:
                     continue
-                region = np.zeros(len(points_trace), bool)
+                active_world = samples["world"][terms.active]
+                region = np.zeros(len(terms.active), bool)
                 for caster in casters:
-                    caster_region = shadow_region(light, element_bounds[caster], samples["world"])
+                    caster_region = shadow_region(light, element_bounds[caster], active_world)
                     element_rays[caster] += np.count_nonzero(caster_region)
                     region |= caster_region
-                direction, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                region &= np.sum(surface.normal * direction, axis=1) > 0
-                idx = np.flatnonzero(region)
-                if len(idx) == 0:
+                local = np.flatnonzero(region)
+                if len(local) == 0:
                     continue
+                idx = terms.active[local]
+                _, distance, _ = shading.light_incidence(light, points_trace[idx], scene.origin)
                 origins = points_trace[idx] + surface.normal[idx] * eps[idx, None]
-                blocked = scene.occluded(origins, direction[idx], distance[idx] - 2 * eps[idx])
-                visibility[layer_name][light_index][idx] = np.where(blocked, 0.0, 1.0)
+                blocked = scene.occluded(origins, terms.direction[local], distance - 2 * eps[idx])
+                terms.visibility[local] = np.where(blocked, 0.0, 1.0)
                 counters.shadow_rays += len(idx)
         counters.shadow_ms = _ms(start)
 
@@ -324,9 +323,12 @@ class FrameRenderer:
         for layer_name, samples in layers.items():
             surface = samples["surface"]
             color = surface.emission.copy()
-            for light_index, light in enumerate(snapshot.lights):
-                direction, _, irradiance = shading.light_incidence(light, samples["world"], np.zeros(3))
-                color += shading.brdf_cosine(surface, direction) * irradiance * visibility[layer_name][light_index][:, None]
+            for terms in visibility[layer_name]:
+                if len(terms.active) == 0:
+                    continue
+                lit = terms.active
+                weight = terms.irradiance * terms.visibility[:, None]
+                color[lit] += shading.brdf_cosine(surface.subset(lit), terms.direction) * weight
             diffuse_ambient, fresnel = shading.ambient(surface, world)
             color += diffuse_ambient
             transmissive = surface.transmission * (1.0 - surface.metallic)
@@ -388,6 +390,39 @@ class _Counters:
     @property
     def rays(self):
         return self.shadow_rays + self.reflection_rays + self.refraction_rays
+
+
+# Pixels receiving less than this fraction of a light's strongest irradiance in the frame skip it.
+LIGHT_CUTOFF = 1e-4
+
+
+@dataclass
+class LightTerms:
+    """One light at the pixels of one G-buffer layer it reaches."""
+
+    active: np.ndarray  # indices of the pixels facing the light with non-negligible irradiance
+    direction: np.ndarray  # (n_active, 3) unit, towards the light
+    irradiance: np.ndarray  # (n_active, 3)
+    visibility: np.ndarray  # (n_active,) lit fraction: shadow map, replaced by rays where traced
+
+
+def light_terms(light, samples, shadow_maps) -> LightTerms:
+    """Direction, irradiance and raster (shadow-map) visibility of ``light`` where it matters."""
+    surface = samples["surface"]
+    if len(surface) == 0:
+        empty = np.zeros((0, 3))
+        return LightTerms(np.zeros(0, np.int64), empty, empty, np.zeros(0))
+    direction, _, irradiance = shading.light_incidence(light, samples["world"], np.zeros(3))
+    strength = irradiance.max(axis=1)
+    reached = (shading.dot(surface.normal, direction) > 0) & (strength > LIGHT_CUTOFF * max(strength.max(), 1e-30))
+    active = np.flatnonzero(reached)
+    direction = np.ascontiguousarray(direction[active])
+    irradiance = np.ascontiguousarray(irradiance[active])
+    if light.cast_shadows and shadow_maps and len(active):
+        visibility = shadow_visibility(shadow_maps, samples["world"][active], surface.normal[active])
+    else:
+        visibility = np.ones(len(active))
+    return LightTerms(active, direction, irradiance, visibility)
 
 
 def _element_bounds(snapshot):

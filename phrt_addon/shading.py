@@ -51,6 +51,13 @@ class SurfaceSamples:
     def __len__(self):
         return len(self.position)
 
+    def subset(self, index) -> "SurfaceSamples":
+        """The samples at ``index`` (precomputed terms are sliced, not recomputed)."""
+        part = object.__new__(SurfaceSamples)
+        for name, value in self.__dict__.items():
+            part.__dict__[name] = value[index]
+        return part
+
 
 def dot(a, b):
     """Row-wise dot product of (N,3) arrays."""
