@@ -38,7 +38,8 @@ void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) { n = -n; }
   vec4 albedo = base_color;
-  if (params.z > 0.5) { albedo *= texture(base_tex, v_uv); }
+  /* Wrap like the tracer (sample_texture): GPUTexture clamps to its edge by default. */
+  if (params.z > 0.5) { albedo *= texture(base_tex, fract(v_uv)); }
   albedo = clamp(albedo, 0.0, 1.0);
   out_position = vec4(v_position, 1.0);
   out_normal = vec4(n, params.x);

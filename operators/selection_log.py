@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 from pathlib import Path
 
 import bpy
@@ -39,10 +38,7 @@ def _json_value(column, value):
         return bool(value)
     if column in ("element", "reason"):
         return "" if value is None else str(value)
-    number = runlog.finite_or_none(value)
-    if isinstance(number, float) and not math.isfinite(number):
-        return None
-    return number
+    return runlog.finite_or_none(value)
 
 
 def write_selection_log(rows, filepath) -> Path:
@@ -71,18 +67,6 @@ def write_selection_log(rows, filepath) -> Path:
     except OSError as error:
         raise SelectionLogError(f"cannot write '{path}': {error.strerror or error}") from None
     return path
-
-
-def read_selection_log(filepath) -> list:
-    """Rows of a file written by ``write_selection_log`` (typed like ``runlog.read_selection``)."""
-    path = Path(filepath)
-    if path.suffix.lower() == ".json":
-        return json.loads(path.read_text(encoding="utf-8"))
-    with open(path, newline="", encoding="utf-8") as handle:
-        reader = csv.reader(handle)
-        header = next(reader)
-        return [{column: runlog._parse_cell(column, cell) for column, cell in zip(header, cells)}
-                for cells in reader]
 
 
 def rows_to_export(run_dir: str = "") -> list:

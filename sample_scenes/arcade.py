@@ -324,7 +324,7 @@ PATHS = (
                     "glancing left through the arches so the candidates sweep across the view, down the "
                     "west aisle and east along the south aisle, then walk into the courtyard between the "
                     "large mirror and glass spheres and look around.",
-        waypoints=((15.6, -5.8), (15.5, 0.0), (15.0, 5.6), (12.0, 6.4), (6.0, 6.2), (0.0, 6.4),
+        waypoints=((14.0, -6.0), (13.8, 0.0), (14.6, 5.4), (12.0, 6.4), (6.0, 6.2), (0.0, 6.4),
                    (-6.0, 6.4), (-12.0, 6.4), (-15.0, 5.2), (-15.3, 0.0), (-15.0, -5.0), (-12.0, -6.3),
                    (-6.0, -6.4), (-2.5, -6.1), (-1.5, -4.5), (-1.3, -2.0), (-1.0, -0.5), (-0.5, 1.0)),
         speeds=((1, RUN_MPS), (885, RUN_MPS), (925, WALK_MPS), (975, 0.3), (1000, 0.0)),

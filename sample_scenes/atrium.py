@@ -328,8 +328,8 @@ PATHS = (
                     "water (it fills over 40% of the frame), then walk along the rim and run (4.5 m/s) past "
                     "the bronze sculpture and the linden to the exedra, turning round there for a far view "
                     "back over the plaza.",
-        waypoints=((7.5, 14.5), (5.0, 9.5), (2.0, 4.25), (3.5, 4.2), (5.6, 4.1), (6.8, 2.0), (6.9, -2.5),
-                   (5.5, -7.5), (2.0, -12.0), (0.5, -14.5), (0.0, -16.0)),
+        waypoints=((5.9, 11.6), (4.0, 7.6), (2.0, 4.25), (3.5, 4.2), (5.6, 4.1), (6.8, 2.0), (6.9, -2.5),
+                   (5.5, -7.5), (2.0, -12.0), (0.5, -14.5), (0.0, -16.5), (-0.3, -19.0)),
         speeds=((1, WALK_MPS), (330, WALK_MPS), (370, 0.0), (450, 0.0), (490, WALK_MPS), (580, WALK_MPS),
                 (620, RUN_MPS), (900, RUN_MPS), (950, 0.0), (1000, 0.0)),
         floor_z=PLAZA_TOP,

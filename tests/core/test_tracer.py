@@ -87,6 +87,12 @@ def uv_sphere(name, centre, radius, segments=96, rings=48, material=0, element=-
     return mesh(name, np.asarray(centre) + radius * unit_points, triangles, normals, material, element)
 
 
+def translation(offset):
+    matrix = np.eye(4)
+    matrix[:3, 3] = offset
+    return matrix
+
+
 def snapshot(meshes, materials, lights=(), world=BLACK, max_bounces=4):
     camera = Camera(matrix_world=np.eye(4), projection=np.eye(4), width=4, height=4)
     n_elements = 1 + max([int(m.tri_element.max()) for m in meshes] + [-1])
@@ -274,9 +280,11 @@ def shadow_scene(scale, offset):
     """A floor (z = 0, 6 x 6) with a hollow closed unit box standing on it, scaled by ``scale``
     and moved by ``offset`` along x, y, z; a sun from +x.  Diffuse grey, black world."""
     shift = np.array([offset, offset, offset])
-    floor = quad("floor", shift, 6 * scale, 6 * scale, "+z", material=0)
-    cube = box("box", shift + scale * np.array([-0.5, -0.5, 0.0]), shift + scale * np.array([0.5, 0.5, 1.0]),
-               material=0)
+    # Local float32 vertices and a float64 world matrix, as the engine's snapshots have them.
+    floor = quad("floor", (0, 0, 0), 6 * scale, 6 * scale, "+z", material=0)
+    cube = box("box", scale * np.array([-0.5, -0.5, 0.0]), scale * np.array([0.5, 0.5, 1.0]), material=0)
+    for instance in (floor, cube):
+        instance.matrix_world = translation(shift)
     sun = Light("sun", "SUN", (1.0, 1.0, 1.0), direction=tuple(SUN_DIRECTION))
     return snapshot([floor, cube], [diffuse("grey")], [sun]), shift
 
@@ -360,9 +368,11 @@ def test_grazing_sun_on_an_empty_floor_lights_every_point(scale, offset, closing
     """No caster: at 89 degrees sun incidence and a view ray 2 degrees above the floor,
     no floor point shadows itself."""
     shift = np.array([offset, offset, 0.0])
+    floor = quad("floor", (0, 0, 0), 2000 * scale, 2000 * scale, "+z")
+    floor.matrix_world = translation(shift)
     sun_direction = shading.normalize(np.array([np.sin(np.radians(89.0)), 0.0, -np.cos(np.radians(89.0))]))
     sun = Light("sun", "SUN", (1.0, 1.0, 1.0), direction=tuple(sun_direction))
-    snap = snapshot([quad("floor", shift, 2000 * scale, 2000 * scale, "+z")], [diffuse("grey")], [sun])
+    snap = snapshot([floor], [diffuse("grey")], [sun])
     scene, radiance_tracer = build(snap, threads=2)
     closing(scene)
     distances = np.linspace(1.0, 500.0, 5000) * scale
@@ -379,7 +389,7 @@ def test_grazing_sun_on_an_empty_floor_lights_every_point(scale, offset, closing
 def test_grazing_mirror_reflection_does_not_hit_its_own_surface(closing):
     materials = [MIRROR, emissive("sky", (0.0, 0.0, 1.0))]
     meshes = [quad("mirror", (0, 0, 0), 2000, 2000, "+z", material=0),
-              quad("sky", (0, 0, 50), 4000, 4000, "-z", material=1)]
+              quad("sky", (0, 0, 50), 1e6, 1e6, "-z", material=1)]
     scene, radiance_tracer = build(snapshot(meshes, materials))
     closing(scene)
     elevation = np.radians(np.linspace(0.05, 5.0, 200))

@@ -1,0 +1,385 @@
+"""``phrt.replay_path``: replay a camera path over a frame range in one or more modes,
+one RUN_DIR per mode (CONTRACT.md sections 3 and 4).
+
+Two ways to run, same files:
+
+- In the UI (invoked from the N panel, F3, a button): a modal operator renders one
+  frame per timer tick, shows progress (cursor counter and status bar) and stops
+  between frames on Esc.  What was rendered stays valid: complete frames, flushed
+  logs and a ``summary.json`` marked ``"cancelled": true``.
+- From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
+  ``engine.replay.replay()`` runs every frame of every mode to the end.
+
+``SteppedReplay`` is ``engine.replay.replay()`` cut into steps for the modal path;
+it writes exactly what ``replay()`` writes (a test compares the two).
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import bpy
+from bpy.props import EnumProperty, IntProperty, StringProperty
+
+from ..engine import extract, final, replay
+from ..phrt_addon import runlog
+
+MODE_ITEMS = (
+    ("RASTER", "Raster", "Raster only: no ray tracing at all", 1),
+    ("HYBRID", "Hybrid", "Raster plus the ray tracing the heuristic selects within the budget", 2),
+    ("RAYTRACE", "Ray Trace", "Every visible candidate ray traced, no budget: the reference", 4),
+)
+IMAGE_ITEMS = (
+    ("EXR", "OpenEXR", "Multilayer EXR with every PHRT pass (needed by 'phrt report' error metrics)", 0),
+    ("PNG", "PNG", "8-bit sRGB PNG of the combined image", 1),
+    ("NONE", "None", "Logs only, no images", 2),
+)
+# Events a running replay lets through, so the designer can still look around.
+_NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
+                      "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
+
+
+class SteppedReplay:
+    """``engine.replay.replay()`` one frame per ``step()``.
+
+    ``run = SteppedReplay(...)``; ``while run.remaining: run.step()``;
+    ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
+    An exception in ``step()`` restores the scene and leaves the complete rows
+    written so far (like ``replay()``)."""
+
+    def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
+                 resolution=None, scene_label=None):
+        mode = mode.upper()
+        if mode not in replay.MODES:
+            raise replay.ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in replay.MODES)}")
+        if images not in replay.IMAGE_FORMATS:
+            raise replay.ReplayError(f"unknown image format '{images}': use exr, png or none")
+        if budget_ms is not None and not budget_ms >= 0:
+            raise replay.ReplayError(f"budget must be a number of milliseconds >= 0, not {budget_ms}")
+        start, end = frame_range
+        if end < start:
+            raise replay.ReplayError(f"frame range {start}-{end} ends before it starts")
+        self.run_dir = Path(run_dir)
+        self.frames_dir = self.run_dir / runlog.FRAMES_DIR
+        try:
+            self.frames_dir.mkdir(parents=True, exist_ok=True)
+            probe = self.run_dir / ".phrt-write-test"
+            probe.write_text("")
+            probe.unlink()
+        except OSError as error:
+            raise replay.ReplayError(f"cannot write to output folder '{self.run_dir}': "
+                                     f"{error.strerror or error}") from None
+        self.scene, self.camera, self.mode, self.images = scene, camera, mode, images
+        self.scene_label = scene_label
+        self.frame_range = (start, end)
+        self.frames = list(range(start, end + 1))
+        self.done = 0
+        self.settings = extract.read_settings(scene)
+        self.settings.mode = mode
+        if budget_ms is not None:
+            self.settings.budget_ms = float(budget_ms)
+        render = scene.render
+        self._saved = {"camera": scene.camera, "frame": scene.frame_current, "filepath": render.filepath,
+                       "res": (render.resolution_x, render.resolution_y, render.resolution_percentage),
+                       "engine": render.engine, "use_ext": render.use_file_extension}
+        self._image_saved = {key: getattr(render.image_settings, key) for key in
+                             ("file_format", "color_depth", "color_mode") if hasattr(render.image_settings, key)}
+        if hasattr(render.image_settings, "media_type"):
+            self._image_saved = {"media_type": render.image_settings.media_type, **self._image_saved}
+        scene.camera = camera
+        render.engine = "PHRT"
+        if resolution is not None:
+            render.resolution_x, render.resolution_y = resolution
+            render.resolution_percentage = 100
+        replay._set_image_format(scene, images)
+        render.use_file_extension = True
+        self.log = runlog.RunLog(self.run_dir, extra_frame_columns=replay.EXTRA_FRAME_COLUMNS)
+        self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
+        self._open = True
+
+    @property
+    def total(self) -> int:
+        return len(self.frames)
+
+    @property
+    def remaining(self) -> int:
+        return self.total - self.done
+
+    def step(self) -> dict:
+        """Render, write and log the next frame; returns its stats."""
+        if not self._open or not self.remaining:
+            raise ValueError("SteppedReplay: no frame left to render")
+        frame = self.frames[self.done]
+        scene, render, session = self.scene, self.scene.render, self.session
+        try:
+            scene.frame_set(frame)
+            render.filepath = str(self.frames_dir / f"{frame:04d}")
+            begin = time.perf_counter()
+            bpy.ops.render.render(write_still=self.images != "none")
+            wall_ms = (time.perf_counter() - begin) * 1000.0
+            result = session.last_result
+            if result is None:
+                raise replay.ReplayError(f"frame {frame} did not render (see the messages above)")
+            row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
+            row.update({key: result.stats.get(key) for key in replay.EXTRA_FRAME_COLUMNS})
+            row["wall_ms"] = wall_ms
+            self.log.add_frame(row, result.selection_rows)
+            session.last_result = None
+        except BaseException:
+            self._close(summary=None)
+            raise
+        self.done += 1
+        return result.stats
+
+    def finish(self, cancelled=False) -> replay.ReplayResult:
+        """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore the scene."""
+        if not self._open:
+            raise ValueError("SteppedReplay: already finished")
+        cancelled = bool(cancelled and self.remaining)
+        width, height = extract.resolution(self.scene)
+        start, end = self.frame_range
+        summary = {
+            "scene": self.scene_label or self.scene.name, "path": self.camera.name, "resolution": [width, height],
+            "images": self.images, "frame_range": [start, end], "cancelled": cancelled,
+            "cost_mode": self.settings.cost_mode, "selection_weight": self.settings.selection_weight,
+            "max_area_fraction": self.settings.max_area_fraction, **replay.versions()}
+        written = self._close(summary=summary)
+        return replay.ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
+                                   cancelled=cancelled, summary=written)
+
+    def _close(self, summary):
+        if not self._open:
+            return None
+        self._open = False
+        written = None
+        try:
+            if summary is not None:
+                written = self.log.close(summary)
+            else:
+                self.log.__exit__(None, None, None)  # keep the complete rows, no summary
+        finally:
+            self.session.__exit__(None, None, None)
+            self._restore()
+        return written
+
+    def _restore(self):
+        scene, render, saved = self.scene, self.scene.render, self._saved
+        scene.camera = saved["camera"]
+        scene.frame_set(saved["frame"])
+        render.filepath = saved["filepath"]
+        render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
+        render.engine = saved["engine"]
+        render.use_file_extension = saved["use_ext"]
+        for key, value in self._image_saved.items():
+            try:
+                setattr(render.image_settings, key, value)
+            except (TypeError, AttributeError):
+                pass
+
+
+def scene_label(scene) -> str:
+    """How run folders name the scene: the .blend file's name (as ``phrt render`` does), else the scene's."""
+    return Path(bpy.data.filepath).stem if bpy.data.filepath else scene.name
+
+
+def output_root(output_dir: str) -> Path:
+    """``output_dir`` as an absolute folder ('//' is the .blend file's folder, or the
+    working directory of an unsaved file)."""
+    return Path(bpy.path.abspath(output_dir or "//phrt_runs")).resolve()
+
+
+def check_output_root(root: Path):
+    """ReplayError unless the folder ``root`` can be created and written (creates nothing)."""
+    existing = root
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise replay.ReplayError(f"cannot write to output folder '{root}': '{existing}' is a file, not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise replay.ReplayError(f"cannot write to output folder '{root}': permission denied on '{existing}'")
+
+
+def _path_search(self, context, edit_text):
+    return [camera.name for camera in replay.camera_paths(context.scene) if edit_text.lower() in camera.name.lower()]
+
+
+def _refresh_candidates(context):
+    """Update the N panel's candidate list from the last frame (if the panels are registered)."""
+    from ..panels import candidates
+    candidates.refresh(context.window_manager, context.scene)
+
+
+class PHRT_OT_replay_path(bpy.types.Operator):
+    """Render a camera path frame by frame in the chosen modes, writing one run folder per mode
+    (frames, frames.csv, selection.csv, summary.json). Esc stops between frames"""
+
+    bl_idname = "phrt.replay_path"
+    bl_label = "Replay Camera Path"
+    bl_options = {"REGISTER"}
+
+    path: StringProperty(
+        name="Camera Path", search=_path_search,
+        description="The animated camera to replay; empty: the scene's first path "
+                    "(its 'phrt_paths' order, else the active camera)",
+    )
+    frame_start: IntProperty(
+        name="Start Frame", min=0,
+        description="First frame to render (default: the path's first keyframe)",
+    )
+    frame_end: IntProperty(
+        name="End Frame", min=0,
+        description="Last frame to render (default: the path's last keyframe)",
+    )
+    modes: EnumProperty(
+        name="Modes", items=MODE_ITEMS, options={"ENUM_FLAG"}, default={"HYBRID"},
+        description="Render the path once in each chosen mode, each into its own run folder",
+    )
+    output_dir: StringProperty(
+        name="Output Folder", subtype="DIR_PATH", default="//phrt_runs",
+        description="Run folders <scene>-<path>-<mode> are written here ('//' is the .blend file's folder)",
+    )
+    images: EnumProperty(
+        name="Images", items=IMAGE_ITEMS, default="EXR",
+        description="Image format of the rendered frames",
+    )
+
+    # -- planning ---------------------------------------------------------------
+    def _resolve(self, context):
+        """(camera, (start, end), modes in order, output root); ReplayError on bad input."""
+        scene = context.scene
+        camera = replay.find_path(scene, self.path or None)
+        start, end = replay.path_frame_range(scene, camera)
+        if self.properties.is_property_set("frame_start"):
+            start = self.frame_start
+        if self.properties.is_property_set("frame_end"):
+            end = self.frame_end
+        if end < start:
+            raise replay.ReplayError(f"frame range {start}-{end} ends before it starts: "
+                                     f"give frame_end >= frame_start")
+        modes = [mode for mode in replay.MODES if mode in self.modes]
+        if not modes:
+            raise replay.ReplayError("no mode chosen: pick at least one of raster, hybrid, raytrace")
+        root = output_root(self.output_dir)
+        check_output_root(root)
+        return camera, (start, end), modes, root
+
+    def _run_dir(self, context, camera, mode, root):
+        return replay.default_run_dir(root, scene_label(context.scene), camera.name, mode)
+
+    # -- blocking: scripts and background mode ------------------------------------
+    def execute(self, context):
+        try:
+            camera, frame_range, modes, root = self._resolve(context)
+        except replay.ReplayError as error:
+            self.report({"ERROR"}, f"PHRT: {error}")
+            return {"CANCELLED"}
+        scene, window_manager = context.scene, context.window_manager
+        frames = frame_range[1] - frame_range[0] + 1
+        results = []
+        window_manager.progress_begin(0, frames * len(modes))
+        try:
+            for index, mode in enumerate(modes):
+                def progress(done, total, frame_ms, index=index, mode=mode):
+                    window_manager.progress_update(index * frames + done)
+                    if bpy.app.background:
+                        print(f"PHRT replay {camera.name} {mode.lower()}: frame {done}/{total} "
+                              f"({frame_ms:.0f} ms)", flush=True)
+                results.append(replay.replay(
+                    scene, camera, frame_range, mode, self._run_dir(context, camera, mode, root),
+                    images=self.images.lower(), scene_label=scene_label(scene), on_progress=progress))
+        except (replay.ReplayError, RuntimeError) as error:
+            self.report({"ERROR"}, f"PHRT: replay of '{camera.name}' failed: {error}")
+            return {"CANCELLED"}
+        finally:
+            window_manager.progress_end()
+            _refresh_candidates(context)
+        self._report_done(results, cancelled=False)
+        return {"FINISHED"}
+
+    def _report_done(self, results, cancelled):
+        runs = ", ".join(f"{result.mode.lower()} {result.frames_done} frames -> {result.run_dir}" for result in results)
+        verb = "cancelled" if cancelled else "done"
+        self.report({"WARNING" if cancelled else "INFO"}, f"PHRT replay {verb}: {runs or 'nothing rendered'}")
+
+    # -- interactive: one frame per timer tick, Esc stops -----------------------------
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            camera, frame_range, modes, root = self._resolve(context)
+        except replay.ReplayError as error:
+            self.report({"ERROR"}, f"PHRT: {error}")
+            return {"CANCELLED"}
+        self._camera, self._frame_range, self._modes, self._root = camera, frame_range, modes, root
+        self._mode_index = 0
+        self._run = None
+        self._results = []
+        self._frames_per_mode = frame_range[1] - frame_range[0] + 1
+        window_manager = context.window_manager
+        window_manager.progress_begin(0, self._frames_per_mode * len(modes))
+        self._timer = window_manager.event_timer_add(0.01, window=context.window)
+        window_manager.modal_handler_add(self)
+        self._status(context, "starting")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC" and event.value == "PRESS":
+            return self._stop(context, cancelled=True)
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"} if event.type in _NAVIGATION_EVENTS else {"RUNNING_MODAL"}
+        try:
+            if self._run is None:
+                mode = self._modes[self._mode_index]
+                self._run = SteppedReplay(context.scene, self._camera, self._frame_range, mode,
+                                          self._run_dir(context, self._camera, mode, self._root),
+                                          images=self.images.lower(), scene_label=scene_label(context.scene))
+            stats = self._run.step()
+            done = self._mode_index * self._frames_per_mode + self._run.done
+            context.window_manager.progress_update(done)
+            self._status(context, f"frame {self._run.done}/{self._run.total}, {stats['total_ms']:.0f} ms")
+            if not self._run.remaining:
+                self._results.append(self._run.finish())
+                self._run = None
+                self._mode_index += 1
+                if self._mode_index == len(self._modes):
+                    return self._stop(context, cancelled=False)
+        except (replay.ReplayError, RuntimeError) as error:
+            self._run = None  # step() already closed its logs and restored the scene
+            self._cleanup(context)
+            self.report({"ERROR"}, f"PHRT: replay of '{self._camera.name}' failed: {error}")
+            return {"CANCELLED"}
+        return {"RUNNING_MODAL"}
+
+    def cancel(self, context):
+        """Blender ends the operator (file loaded, window closed): keep what was rendered."""
+        self._stop(context, cancelled=True)
+
+    def _stop(self, context, cancelled):
+        if self._run is not None:
+            self._results.append(self._run.finish(cancelled=cancelled))
+            self._run = None
+        self._cleanup(context)
+        self._report_done(self._results, cancelled)
+        return {"CANCELLED"} if cancelled else {"FINISHED"}
+
+    def _cleanup(self, context):
+        window_manager = context.window_manager
+        if self._timer is not None:
+            window_manager.event_timer_remove(self._timer)
+            self._timer = None
+        window_manager.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        _refresh_candidates(context)
+
+    def _status(self, context, text):
+        if context.workspace is None:
+            return
+        mode = self._modes[min(self._mode_index, len(self._modes) - 1)].lower()
+        context.workspace.status_text_set(
+            f"PHRT replay '{self._camera.name}' {mode} ({self._mode_index + 1}/{len(self._modes)}): {text}"
+            f"  -  Esc to stop (rendered frames are kept)")
+
+
+CLASSES = (PHRT_OT_replay_path,)
