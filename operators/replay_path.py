@@ -35,6 +35,9 @@ IMAGE_ITEMS = (
     ("PNG", "PNG", "8-bit sRGB PNG of the combined image", 1),
     ("NONE", "None", "Logs only, no images", 2),
 )
+# '//' (relative to the .blend file) must be declared on Blender 4.5+; older versions accept it silently.
+BLEND_RELATIVE_PATH = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
+                       if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
                       "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
@@ -236,7 +239,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
         description="Render the path once in each chosen mode, each into its own run folder",
     )
     output_dir: StringProperty(
-        name="Output Folder", subtype="DIR_PATH", default="//phrt_runs",
+        name="Output Folder", subtype="DIR_PATH", default="//phrt_runs", options=BLEND_RELATIVE_PATH,
         description="Run folders <scene>-<path>-<mode> are written here ('//' is the .blend file's folder)",
     )
     images: EnumProperty(

@@ -17,6 +17,7 @@ from bpy.props import StringProperty
 
 from ..engine import final
 from ..phrt_addon import runlog
+from .replay_path import BLEND_RELATIVE_PATH
 
 FORMATS = (".csv", ".json")
 _BOOL_COLUMNS = ("visible", "selected")
@@ -89,11 +90,11 @@ class PHRT_OT_export_selection_log(bpy.types.Operator):
     bl_options = {"REGISTER"}
 
     filepath: StringProperty(
-        name="File", subtype="FILE_PATH",
+        name="File", subtype="FILE_PATH", options=BLEND_RELATIVE_PATH,
         description="Where to write the log; its extension (.csv or .json) chooses the format",
     )
     run_dir: StringProperty(
-        name="Run Folder", subtype="DIR_PATH",
+        name="Run Folder", subtype="DIR_PATH", options=BLEND_RELATIVE_PATH,
         description="Export the selection.csv rows of this replay's run folder instead of the last rendered frame",
     )
     filter_glob: StringProperty(default="*.csv;*.json", options={"HIDDEN"})

@@ -31,7 +31,7 @@ from .scene import SceneSnapshot, transform_points
 from .shadowmap import shadow_visibility
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
-FOOTPRINT_STEP = 4
+FOOTPRINT_STEP = 8
 
 
 @dataclass
@@ -425,23 +425,43 @@ def light_terms(light, samples, shadow_maps) -> LightTerms:
     return LightTerms(active, direction, irradiance, visibility)
 
 
-def _element_bounds(snapshot):
-    """World-space (min, max) of each element's triangles (None when it has none)."""
-    lows = [None] * len(snapshot.elements)
-    highs = [None] * len(snapshot.elements)
-    for mesh in snapshot.meshes:
-        if mesh.n_triangles == 0 or not np.any(mesh.tri_element >= 0):
-            continue
-        world = transform_points(mesh.matrix_world, mesh.positions)
+_LOCAL_BOUNDS = {}  # geometry key -> {element: (low, high)} in local space (static per replay)
+
+
+def _local_element_bounds(mesh):
+    cached = _LOCAL_BOUNDS.get(mesh.geometry_key)
+    if cached is None:
+        cached = {}
+        corners = mesh.positions[mesh.triangles]  # (T, 3, 3)
+        low = corners.min(axis=1)
+        high = corners.max(axis=1)
         for element in np.unique(mesh.tri_element[mesh.tri_element >= 0]):
-            corners = world[mesh.triangles[mesh.tri_element == element].ravel()]
-            low, high = corners.min(axis=0), corners.max(axis=0)
-            if lows[element] is None:
-                lows[element], highs[element] = low, high
+            chosen = mesh.tri_element == element
+            cached[int(element)] = (low[chosen].min(axis=0).astype(np.float64),
+                                    high[chosen].max(axis=0).astype(np.float64))
+        if len(_LOCAL_BOUNDS) > 4096:
+            _LOCAL_BOUNDS.clear()
+        _LOCAL_BOUNDS[mesh.geometry_key] = cached
+    return cached
+
+
+def _element_bounds(snapshot):
+    """World-space (min, max) of each element (None when it has no triangles): the local
+    bounds (cached per geometry) with their 8 corners moved by the world matrix."""
+    bounds = [None] * len(snapshot.elements)
+    signs = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
+    for mesh in snapshot.meshes:
+        if mesh.n_triangles == 0:
+            continue
+        for element, (low, high) in _local_element_bounds(mesh).items():
+            corners = transform_points(mesh.matrix_world, low + signs * (high - low))
+            world_low, world_high = corners.min(axis=0), corners.max(axis=0)
+            if bounds[element] is None:
+                bounds[element] = (world_low, world_high)
             else:
-                lows[element] = np.minimum(lows[element], low)
-                highs[element] = np.maximum(highs[element], high)
-    return [None if low is None else (low, high) for low, high in zip(lows, highs)]
+                bounds[element] = (np.minimum(bounds[element][0], world_low),
+                                   np.maximum(bounds[element][1], world_high))
+    return bounds
 
 
 def shadow_region(light, bounds, points) -> np.ndarray:

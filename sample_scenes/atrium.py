@@ -38,16 +38,16 @@ RIM_THICKNESS, RIM_TOP, WATER_Z = 0.4, 0.6, 0.45
 ENCLOSURE = 30.0
 
 OVER_AREA_PATH = "path3"
-OVER_AREA_FRAMES = (380, 440)
+OVER_AREA_FRAMES = (350, 440)
 OVER_AREA_ELEMENT = "Pool/Water"
 
 SHADOWS = dict(shadows=True, reflections=False, refractions=False)
 # (name, position, trunk height, trunk radius, crown centre z, crown radii, leaves, clusters, leaf size, K, Q)
 TREES = (
-    ("Tree_Oak", (-11.0, 5.0), 3.6, 0.36, 6.4, (4.2, 4.2, 2.7), 12000, 40, 0.16, 2.0, 1.5),
-    ("Tree_Linden", (10.0, -6.0), 3.0, 0.28, 5.5, (3.2, 3.2, 2.4), 9000, 30, 0.15, 1.5, 1.2),
-    ("Tree_Young", (11.0, 7.5), 2.6, 0.16, 4.4, (2.0, 2.0, 1.5), 5000, 18, 0.13, 1.0, 0.8),
-    ("Tree_Cypress", (-12.0, -8.0), 1.0, 0.22, 4.9, (1.25, 1.25, 3.8), 8000, 34, 0.09, 1.0, 1.0),
+    ("Tree_Oak", (-11.0, 5.0), 3.6, 0.45, 6.4, (4.2, 4.2, 2.7), 22000, 60, 0.13, 2.0, 1.5),
+    ("Tree_Linden", (10.0, -6.0), 3.0, 0.34, 5.5, (3.2, 3.2, 2.4), 15000, 45, 0.12, 1.5, 1.2),
+    ("Tree_Young", (11.0, 7.5), 2.6, 0.18, 4.4, (2.0, 2.0, 1.5), 7000, 24, 0.11, 1.0, 0.8),
+    ("Tree_Cypress", (-12.0, -8.0), 1.0, 0.25, 4.9, (1.25, 1.25, 3.8), 12000, 50, 0.08, 1.0, 1.0),
 )
 TREE_LEAVES = {"Tree_Oak": "LeavesDark", "Tree_Linden": "LeavesLight", "Tree_Young": "LeavesLight",
                "Tree_Cypress": "LeavesCypress"}
@@ -95,10 +95,16 @@ def _tree(rng: np.random.Generator, trunk_height: float, trunk_radius: float, cr
         points = (1 - t) ** 2 * start + 2 * (1 - t) * t * middle + t ** 2 * c
         data.add(geo.tube(points, np.linspace(0.35 * trunk_radius, 0.04 * trunk_radius + 0.01, 5), 6,
                           cap_start=False, cap_end=True))
-    # Leaves: Gaussian clumps around the cluster centres, kept inside the crown.
+    # Leaves: balls of foliage around the cluster centres, pulled back inside the crown.
     owner = rng.integers(0, clusters, leaves)
-    spread = 0.35 * crown_radii.min() + 0.2
-    positions = centres[owner] + rng.normal(0.0, spread, (leaves, 3)) * np.array((1.0, 1.0, 0.7))
+    cluster_radius = 0.32 * crown_radii.min() + 0.25
+    direction = rng.normal(size=(leaves, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    positions = centres[owner] + direction * cluster_radius * rng.random((leaves, 1)) ** 0.5
+    relative = (positions - crown) / crown_radii
+    outside = np.linalg.norm(relative, axis=1)
+    relative /= np.maximum(outside, 1.0)[:, None]
+    positions = crown + relative * crown_radii
     positions[:, 2] = np.maximum(positions[:, 2], lowest)
     sizes = leaf_size * rng.uniform(0.7, 1.3, leaves)
     data.add(geo.leaf_cards(positions, sizes, rng, material=1))
@@ -236,7 +242,7 @@ def build(data: SceneData, rng: np.random.Generator) -> None:
     mat("LeavesDark", (0.09, 0.25, 0.05), roughness=0.6)
     mat("LeavesLight", (0.2, 0.4, 0.08), roughness=0.6)
     mat("LeavesCypress", (0.06, 0.18, 0.07), roughness=0.6)
-    water = mat("Water", (1.0, 1.0, 1.0), roughness=0.0, transmission=1.0, ior=1.33)
+    water = mat("Water", (0.85, 0.95, 0.97), roughness=0.0, transmission=1.0, ior=1.33)
 
     data.mesh_object("Ground", geo.MeshData().add(
         geo.grid(-40.0, 40.0, -40.0, 40.0, 40, 40, 0.0, uv_scale=0.25)), [grass])
@@ -297,13 +303,13 @@ PATHS = (
         name="path1",
         description="Walk (1.4 m/s) from the north lawn under the oak's canopy, looking up into the leaves, "
                     "past the seated statue and along the pool, looking at the water and the cypress.",
-        waypoints=((-4.0, 17.0), (-6.5, 12.0), (-8.0, 7.6), (-7.4, 3.5), (-7.0, 0.0), (-6.8, -4.2),
+        waypoints=((-5.2, 13.6), (-6.6, 10.5), (-8.0, 7.6), (-7.4, 3.5), (-7.0, 0.0), (-6.8, -4.2),
                    (-5.0, -6.6), (-1.0, -8.0), (3.0, -8.5)),
         speeds=((1, WALK_MPS), (1000, WALK_MPS)),
         floor_z=PLAZA_TOP,
         glances=((1, 0, -4), (80, 0, -4), (120, 25, 2), (160, 0, -4), (1000, 0, -4)),
-        looks=(Look(180, 360, (-10.0, 5.5, 5.5), ramp=50), Look(400, 540, (-9.0, 0.0, 1.9)),
-               Look(580, 720, (-2.0, -0.5, 0.45)), Look(740, 880, (-12.0, -8.0, 3.5))),
+        looks=(Look(190, 400, (-10.0, 5.5, 5.5), ramp=50), Look(430, 580, (-9.0, 0.0, 1.9)),
+               Look(570, 720, (-2.0, -0.5, 0.45), ramp=60), Look(700, 860, (-12.0, -8.0, 3.5), ramp=70)),
     ),
     PathSpec(
         name="path2",
@@ -328,13 +334,13 @@ PATHS = (
                     "water (it fills over 40% of the frame), then walk along the rim and run (4.5 m/s) past "
                     "the bronze sculpture and the linden to the exedra, turning round there for a far view "
                     "back over the plaza.",
-        waypoints=((5.9, 11.6), (4.0, 7.6), (2.0, 4.25), (3.5, 4.2), (5.6, 4.1), (6.8, 2.0), (6.9, -2.5),
+        waypoints=((4.68, 10.95), (3.6, 7.8), (1.0, 3.8), (3.5, 3.85), (5.6, 4.0), (6.8, 2.0), (6.9, -2.5),
                    (5.5, -7.5), (2.0, -12.0), (0.5, -14.5), (0.0, -16.5), (-0.3, -19.0)),
         speeds=((1, WALK_MPS), (330, WALK_MPS), (370, 0.0), (450, 0.0), (490, WALK_MPS), (580, WALK_MPS),
                 (620, RUN_MPS), (900, RUN_MPS), (950, 0.0), (1000, 0.0)),
         floor_z=PLAZA_TOP,
         glances=((1, 0, -4), (100, 0, -4), (140, -35, 0), (200, -35, 0), (240, 0, -4), (910, 0, -4),
                  (1000, 170, 6)),
-        looks=(Look(330, 470, (1.8, -1.6, WATER_Z), ramp=40), Look(560, 680, (9.0, 0.0, 1.6))),
+        looks=(Look(330, 470, (1.0, 2.0, WATER_Z), ramp=40), Look(560, 680, (9.0, 0.0, 1.6))),
     ),
 )

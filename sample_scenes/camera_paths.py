@@ -54,7 +54,6 @@ class Track:
     location: np.ndarray
     yaw: np.ndarray
     pitch: np.ndarray
-    length_m: float
 
     def rotation_euler(self) -> np.ndarray:
         """Blender XYZ Euler angles of a camera (which looks down its -Z)."""
@@ -158,4 +157,4 @@ def track(spec: PathSpec, frames: int = FRAMES, fps: int = FPS) -> Track:
         pitch = pitch + weight * (target_pitch - pitch)
     yaw = gaussian_smooth(np.unwrap(yaw), 3.0)
     pitch = gaussian_smooth(pitch, 3.0)
-    return Track(location, yaw, pitch, length)
+    return Track(location, yaw, pitch)

@@ -23,9 +23,9 @@ Every scene has:
   element covers more than 40% of the frame (the paper's rule that such
   elements are not ray traced), and ``scene["phrt_over_area_element"]``,
   the element: an object name, or ``"<object>/<material>"`` for a material
-  element.  Arcade: ``path2:420-480``, the large mirror sphere
+  element.  Arcade: ``path2:490-620``, the large mirror sphere
   (``MirrorSphere_Large``), which the player walks around close up.
-  Atrium: ``path3:380-440``, the pool's water (``Pool/Water``), which the
+  Atrium: ``path3:350-440``, the pool's water (``Pool/Water``), which the
   player looks down into from the rim;
 - 640 x 480 at 100%, ``scene.phrt.budget_ms = 150``, the PHRT engine when it
   is registered (else Cycles).

@@ -1,9 +1,9 @@
 """Mesh geometry of the sample scenes as plain numpy arrays (no bpy).
 
-A ``Part`` is a small polygon mesh (vertices, faces of one size, optional
-per-corner UVs, one material slot index).  Primitives return parts whose faces
-wind counter-clockwise seen from outside, so normals point out; a ``MeshData``
-concatenates parts into one Blender mesh (see ``blender_data.mesh_object``).
+A ``Part`` is a small polygon mesh (vertices, triangles and quads, optional
+per-corner UVs, one material slot index). Closed primitives return parts whose
+faces wind counter-clockwise seen from outside, so normals point out; a
+``MeshData`` gathers parts into one Blender mesh (``blender_data.mesh_object``).
 Everything here is deterministic: randomness comes in as a seeded
 ``numpy.random.Generator``.
 """
@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
 
 _NO_TRIS = np.zeros((0, 3), dtype=np.int32)
 _NO_QUADS = np.zeros((0, 4), dtype=np.int32)
@@ -53,29 +52,6 @@ class Part:
                     None if self.tri_uvs is None else self.tri_uvs[:, ::-1].copy(),
                     None if self.quad_uvs is None else self.quad_uvs[:, ::-1].copy(), self.material)
 
-    @property
-    def triangle_count(self) -> int:
-        return len(self.tris) + 2 * len(self.quads)
-
-
-def merge(*parts: Part) -> Part:
-    """Join parts into one (material of the first; UVs kept if all have them)."""
-    offset = 0
-    tris, quads = [], []
-    for part in parts:
-        tris.append(part.tris + offset)
-        quads.append(part.quads + offset)
-        offset += len(part.verts)
-    with_uvs = all(p.has_uvs for p in parts)
-
-    def uvs_of(kind, corners):
-        return np.concatenate([getattr(p, kind) if getattr(p, kind) is not None
-                               else np.zeros((len(getattr(p, kind[:-4] + "s")), corners, 2))
-                               for p in parts])
-    return Part(np.concatenate([p.verts for p in parts]), np.concatenate(tris), np.concatenate(quads),
-                uvs_of("tri_uvs", 3) if with_uvs else None,
-                uvs_of("quad_uvs", 4) if with_uvs else None, parts[0].material)
-
 
 @dataclass
 class MeshData:
@@ -110,10 +86,6 @@ class MeshData:
                 np.concatenate(sizes),
                 np.concatenate(materials),
                 np.concatenate(uvs).astype(np.float32) if any_uv else None)
-
-    @property
-    def triangle_count(self) -> int:
-        return sum(p.triangle_count for p in self.parts)
 
 
 # --------------------------------------------------------------------------
@@ -156,25 +128,6 @@ def compose(*matrices: np.ndarray) -> np.ndarray:
     for matrix in matrices:
         result = result @ matrix
     return result
-
-
-def rotation_between(a, b) -> np.ndarray:
-    """4x4 rotation taking unit direction a to unit direction b."""
-    a = np.asarray(a, float) / np.linalg.norm(a)
-    b = np.asarray(b, float) / np.linalg.norm(b)
-    v = np.cross(a, b)
-    c = float(np.dot(a, b))
-    matrix = np.eye(4)
-    if c < -0.999999:
-        axis = np.cross(a, (1.0, 0.0, 0.0))
-        if np.linalg.norm(axis) < 1e-6:
-            axis = np.cross(a, (0.0, 1.0, 0.0))
-        axis /= np.linalg.norm(axis)
-        matrix[:3, :3] = 2.0 * np.outer(axis, axis) - np.eye(3)
-        return matrix
-    vx = np.array(((0, -v[2], v[1]), (v[2], 0, -v[0]), (-v[1], v[0], 0)))
-    matrix[:3, :3] = np.eye(3) + vx + vx @ vx / (1.0 + c)
-    return matrix
 
 
 # --------------------------------------------------------------------------

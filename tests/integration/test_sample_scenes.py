@@ -242,7 +242,7 @@ def test_paths_turn_smoothly(snap):
         forward = -matrices[:, :3, 2]
         cosine = np.clip(np.einsum("ij,ij->i", forward[1:], forward[:-1]), -1.0, 1.0)
         degrees_per_frame = np.degrees(np.arccos(cosine))
-        assert degrees_per_frame.max() < 5.0, f"{path}: turns {degrees_per_frame.max():.1f} deg in a frame"
+        assert degrees_per_frame.max() < 4.0, f"{path}: turns {degrees_per_frame.max():.1f} deg in a frame"
         assert np.degrees(np.arccos(cosine.min())) > 0.5  # it does turn
         # No roll: the camera's x axis stays horizontal.
         assert np.abs(matrices[:, 2, 0]).max() < 1e-5
@@ -320,22 +320,6 @@ def test_over_area_moment_happens_where_recorded(snap):
     frames = list(range(first, last + 1, 10)) + [last]
     fractions = [over_area_fraction(snap, path, frame, element) for frame in frames]
     assert min(fractions) > 0.40, dict(zip(frames, np.round(fractions, 3)))
-
-
-def test_over_area_is_rare_elsewhere(snap):
-    """Outside the recorded moment no path lingers with one element over 40%
-    for long (so the moment is a deliberate test, not the norm)."""
-    recorded_path, first, last = parse_over_area(snap.settings["over_area"])
-    for path, matrices in snap.cameras.items():
-        over = 0
-        for frame in SAMPLED[::3]:
-            if path == recorded_path and first - 60 <= frame <= last + 60:
-                continue
-            origins, directions = view_rays(matrices[frame - 1], snap.tan_half, 32, 24)
-            _, owner, _ = snap.first_hits(origins, directions)
-            counts = np.bincount(owner[owner >= 0], minlength=len(snap.elements))
-            over += counts.max(initial=0) / len(owner) > 0.40
-        assert over <= 3, f"{path}: {over} sampled frames with an element over 40%"
 
 
 # ---------------------------------------------------------------- Blender data

@@ -1,0 +1,202 @@
+"""Tracer benchmark: our ``TraceScene`` queries next to raw embreex on the same rays.
+
+A generated scene of about 200k triangles (a floor, spheres and boxes) is
+uploaded once through ``TraceScene.update``; then three 640x480 ray sets are
+traced, as in a frame:
+
+- primary     camera rays through every pixel centre (nearest hit, hit data);
+- shadow      occlusion rays from the primary hits that face a sun;
+- reflection  mirror rays from the primary hits (incoherent, nearest hit).
+
+Each set goes once through our wrapper (``TraceScene.intersect`` / ``occluded``:
+float32 conversion, thread pool, merging of the scene sets) and once through
+the very same Embree scene's ``EmbreeScene.run`` in a single call (embreex's
+own serial loop), in the same run.  The table gives the median ms of a few
+repeats, throughput in Mrays/s and ours/raw (above 1: the pool beats one call).
+
+No bpy; ``make bench`` calls :func:`run`.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import shading
+from .scene import Camera, Material, MeshInstance, SceneSnapshot
+from .tracer import TraceScene, ray_epsilon, worker_count
+
+WIDTH, HEIGHT = 640, 480
+REPEATS = 5
+SPHERE_SEGMENTS, SPHERE_RINGS = 24, 12  # 552 triangles per sphere (poles are fans)
+N_SPHERES, N_BOXES = 340, 300
+SUN_DIRECTION = (0.35, 0.25, -1.0)
+TARGET_RATIO = 0.8
+
+
+def _sphere(segments, rings):
+    """Unit UV sphere: positions (V,3), triangles (T,3) without degenerate pole triangles."""
+    theta = np.linspace(0.0, np.pi, rings + 1)[1:-1]
+    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)[:-1]
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    ring_points = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1).reshape(-1, 3)
+    positions = np.vstack([[0.0, 0.0, 1.0], ring_points, [0.0, 0.0, -1.0]])
+    top, bottom = 0, len(positions) - 1
+    triangles = []
+    for segment in range(segments):
+        nxt = (segment + 1) % segments
+        triangles.append([top, 1 + segment, 1 + nxt])
+        last = 1 + (rings - 2) * segments
+        triangles.append([bottom, last + nxt, last + segment])
+    for ring in range(rings - 2):
+        for segment in range(segments):
+            nxt = (segment + 1) % segments
+            a, b = 1 + ring * segments + segment, 1 + ring * segments + nxt
+            c, d = a + segments, b + segments
+            triangles += [[a, c, d], [a, d, b]]
+    return positions, np.array(triangles, np.int32)
+
+
+def _box():
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    triangles = [[a, b, c] for a, b, c, _ in quads] + [[a, c, d] for a, _, c, d in quads]
+    return corners, np.array(triangles, np.int32)
+
+
+def _instance(name, positions, triangles, matrix, smooth):
+    positions = np.asarray(positions, np.float32)
+    if smooth:
+        normals = shading.normalize(positions[triangles.ravel()].astype(np.float64))
+    else:
+        v0, v1, v2 = (positions[triangles[:, i]].astype(np.float64) for i in range(3))
+        normals = np.repeat(shading.normalize(np.cross(v1 - v0, v2 - v0)), 3, axis=0)
+    count = len(triangles)
+    return MeshInstance(name=name, matrix_world=matrix, positions=positions, triangles=triangles,
+                        corner_normals=normals.astype(np.float32), corner_uvs=None,
+                        tri_material=np.zeros(count, np.int32), tri_element=np.full(count, -1, np.int32))
+
+
+def bench_scene(seed=0) -> SceneSnapshot:
+    """About 200k triangles: a 40 m floor, spheres and rotated boxes scattered over it."""
+    rng = np.random.default_rng(seed)
+    sphere_positions, sphere_triangles = _sphere(SPHERE_SEGMENTS, SPHERE_RINGS)
+    box_positions, box_triangles = _box()
+    floor = np.array([[-20.0, -20.0, 0.0], [20.0, -20.0, 0.0], [20.0, 20.0, 0.0], [-20.0, 20.0, 0.0]])
+    meshes = [_instance("floor", floor, np.array([[0, 1, 2], [0, 2, 3]], np.int32), np.eye(4), False)]
+    for index in range(N_SPHERES):
+        radius = rng.uniform(0.2, 0.9)
+        matrix = np.diag([radius, radius, radius, 1.0])
+        matrix[:3, 3] = [*rng.uniform(-15.0, 15.0, 2), radius]
+        meshes.append(_instance(f"sphere{index}", sphere_positions, sphere_triangles, matrix, True))
+    for index in range(N_BOXES):
+        size = rng.uniform(0.3, 1.5, 3)
+        angle = rng.uniform(0.0, np.pi)
+        rotation = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0, 0, 1]])
+        matrix = np.eye(4)
+        matrix[:3, :3] = rotation * size
+        matrix[:3, 3] = [*rng.uniform(-15.0, 15.0, 2), size[2] / 2.0]
+        meshes.append(_instance(f"box{index}", box_positions, box_triangles, matrix, False))
+    camera = Camera(matrix_world=np.eye(4), projection=np.eye(4), width=WIDTH, height=HEIGHT)
+    return SceneSnapshot(meshes=meshes, materials=[Material("grey")], elements=[], lights=[], camera=camera)
+
+
+def camera_rays(eye=(0.0, -22.0, 9.0), target=(0.0, 0.0, 0.0), fov_degrees=60.0):
+    """Pinhole rays through every pixel centre: origins (N,3), unit directions (N,3), world space."""
+    eye = np.asarray(eye, float)
+    forward = shading.normalize(np.asarray(target, float) - eye)
+    right = shading.normalize(np.cross(forward, [0.0, 0.0, 1.0]))
+    up = np.cross(right, forward)
+    half = np.tan(np.radians(fov_degrees) / 2.0)
+    xs = ((np.arange(WIDTH) + 0.5) / WIDTH * 2.0 - 1.0) * half * WIDTH / HEIGHT
+    ys = ((np.arange(HEIGHT) + 0.5) / HEIGHT * 2.0 - 1.0) * half
+    grid_x, grid_y = np.meshgrid(xs, ys)
+    directions = forward + grid_x[..., None] * right + grid_y[..., None] * up
+    directions = shading.normalize(directions.reshape(-1, 3))
+    return np.broadcast_to(eye, directions.shape).copy(), directions
+
+
+def _median_ms(function, repeats):
+    function()  # warm-up (first-touch allocations, thread start)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        times.append((time.perf_counter() - start) * 1000.0)
+    return float(np.median(times))
+
+
+def ray_sets(trace_scene, origins_world, directions):
+    """The three ray sets of a frame, in trace-frame float32 (what both paths receive)."""
+    origins = trace_scene.to_trace(origins_world)
+    hits = trace_scene.intersect(origins, directions)
+    hit = np.isfinite(hits["t"])
+    points = origins[hit] + directions[hit] * hits["t"][hit, None]
+    _, _, _, normal, geometric, _, _ = trace_scene.hit_surfaces(hits, hit)
+    incoming = directions[hit]
+    facing = np.where((np.sum(geometric * incoming, axis=1) < 0)[:, None], normal, -normal)
+    eps = ray_epsilon(points, trace_scene.extent)
+    to_sun = -shading.normalize(np.asarray(SUN_DIRECTION, float))
+    lit = facing @ to_sun > 0
+    shadow_origins = points[lit] + facing[lit] * eps[lit, None]
+    shadow_directions = np.broadcast_to(to_sun, shadow_origins.shape)
+    reflection_origins = points + facing * eps[:, None]
+    reflection_directions = shading.reflect(incoming, facing)
+    as32 = lambda array: np.ascontiguousarray(array, dtype=np.float32)  # noqa: E731
+    return {
+        "primary": (as32(origins), as32(directions), None),
+        "shadow": (as32(shadow_origins), as32(shadow_directions), np.full(len(shadow_origins), 1e30, np.float32)),
+        "reflection": (as32(reflection_origins), as32(reflection_directions), None),
+    }
+
+
+def run(out=print, repeats=REPEATS):
+    """Build the scene, trace the three ray sets both ways, print the table; returns the rows."""
+    import embreex
+
+    snapshot = bench_scene()
+    trace_scene = TraceScene()
+    try:
+        upload_ms = trace_scene.update(snapshot, np.zeros(len(snapshot.materials), bool))
+        embree_scene = next(s.scene for kind, s in trace_scene._static if kind == "opaque" and not s.empty)
+        origins_world, directions = camera_rays()
+        sets = ray_sets(trace_scene, origins_world, directions)
+        rows = []
+        for effect, (origins, rays_directions, dists) in sets.items():
+            n = len(origins)
+            if effect == "shadow":
+                ours = lambda: trace_scene.occluded(origins, rays_directions, dists)  # noqa: E731
+                raw = lambda: embree_scene.run(origins, rays_directions, dists=dists.copy(),  # noqa: E731
+                                               query="OCCLUDED")
+                same = np.array_equal(ours(), np.asarray(raw()) != -1)
+            else:
+                ours = lambda: trace_scene.intersect(origins, rays_directions)  # noqa: E731
+                raw = lambda: embree_scene.run(origins, rays_directions, output=1)  # noqa: E731
+                ours_t, raw_out = ours()["t"], raw()
+                raw_t = np.where(raw_out["geomID"] != -1, raw_out["tfar"], np.inf)
+                same = np.array_equal(ours_t.astype(np.float32), raw_t.astype(np.float32))
+            ours_ms = _median_ms(ours, repeats)
+            raw_ms = _median_ms(raw, repeats)
+            rows.append({"effect": effect, "rays": n, "ours_ms": ours_ms, "raw_ms": raw_ms,
+                         "ours_mrays_s": n / ours_ms / 1e3, "raw_mrays_s": n / raw_ms / 1e3,
+                         "ratio": raw_ms / ours_ms, "same_answers": bool(same)})
+    finally:
+        trace_scene.close()
+
+    out(f"PHRT trace benchmark: {snapshot.n_triangles:,} triangles in {len(snapshot.meshes)} meshes, "
+        f"{WIDTH}x{HEIGHT} camera, {trace_scene.threads} worker threads, embreex {embreex.__version__ if hasattr(embreex, '__version__') else '?'}")
+    out(f"upload + BVH build: {upload_ms:.0f} ms; median of {repeats} runs per cell")
+    out(f"{'effect':<11} {'rays':>8} {'ours ms':>8} {'raw ms':>8} {'ours Mray/s':>12} {'raw Mray/s':>11} "
+        f"{'ours/raw':>9} {'same':>5}")
+    for row in rows:
+        out(f"{row['effect']:<11} {row['rays']:>8,} {row['ours_ms']:>8.1f} {row['raw_ms']:>8.1f} "
+            f"{row['ours_mrays_s']:>12.2f} {row['raw_mrays_s']:>11.2f} {row['ratio']:>9.2f} "
+            f"{'yes' if row['same_answers'] else 'NO':>5}")
+    worst = min(row["ratio"] for row in rows)
+    out(f"ours/raw throughput: worst {worst:.2f} (target >= {TARGET_RATIO:.2f}: "
+        f"{'met' if worst >= TARGET_RATIO else 'NOT met'})")
+    return rows
+
+
+if __name__ == "__main__":
+    run()
