@@ -132,6 +132,14 @@ def _blender():
     return bpy
 
 
+def _sample_is_stale(blend_path):
+    """A sample .blend is rebuilt when missing or older than any of its generator's modules."""
+    if not blend_path.exists():
+        return True
+    built = blend_path.stat().st_mtime
+    return any(module.stat().st_mtime > built for module in SAMPLE_DIR.glob("*.py"))
+
+
 def load_scene(name_or_path):
     """Open a .blend file or a sample scene by name (built on first use); returns the scene's label."""
     from .sample_scenes import generate
@@ -139,7 +147,7 @@ def load_scene(name_or_path):
     if path.suffix.lower() != ".blend" and name_or_path in generate.SCENES:
         path = SAMPLE_DIR / f"{name_or_path}.blend"
         bpy = _blender()
-        if not path.exists():
+        if _sample_is_stale(path):
             with _quiet_stdout():
                 generate.write_scene(name_or_path, SAMPLE_DIR)
         bpy.ops.wm.open_mainfile(filepath=str(path))

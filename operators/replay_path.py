@@ -43,13 +43,18 @@ _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPAD
                       "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
 
 
+class ReplayInterrupted(replay.ReplayError):
+    """The frame's render was stopped (Esc during a render): nothing of it was kept."""
+
+
 class SteppedReplay:
     """``engine.replay.replay()`` one frame per ``step()``.
 
     ``run = SteppedReplay(...)``; ``while run.remaining: run.step()``;
     ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
     An exception in ``step()`` restores the scene and leaves the complete rows
-    written so far (like ``replay()``)."""
+    written so far (like ``replay()``); ``ReplayInterrupted`` (the render itself was
+    stopped) leaves the run open for ``finish(cancelled=True)``."""
 
     def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
                  resolution=None, scene_label=None):
@@ -73,9 +78,7 @@ class SteppedReplay:
         except OSError as error:
             raise replay.ReplayError(f"cannot write to output folder '{self.run_dir}': "
                                      f"{error.strerror or error}") from None
-        self.scene, self.camera, self.mode, self.images = scene, camera, mode, images
-        self.scene_label = scene_label
-        self.frame_range = (start, end)
+        self.scene, self.mode, self.images = scene, mode, images
         self.frames = list(range(start, end + 1))
         self.done = 0
         self.settings = extract.read_settings(scene)
@@ -97,6 +100,13 @@ class SteppedReplay:
             render.resolution_percentage = 100
         replay._set_image_format(scene, images)
         render.use_file_extension = True
+        width, height = extract.resolution(scene)
+        # Everything summary.json needs, read now: finish() may run when the scene is gone.
+        self._summary = {
+            "scene": scene_label or scene.name, "path": camera.name, "resolution": [width, height],
+            "images": images, "frame_range": [start, end], "cost_mode": self.settings.cost_mode,
+            "selection_weight": self.settings.selection_weight,
+            "max_area_fraction": self.settings.max_area_fraction, **replay.versions()}
         self.log = runlog.RunLog(self.run_dir, extra_frame_columns=replay.EXTRA_FRAME_COLUMNS)
         self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
         self._open = True
@@ -122,36 +132,34 @@ class SteppedReplay:
             bpy.ops.render.render(write_still=self.images != "none")
             wall_ms = (time.perf_counter() - begin) * 1000.0
             result = session.last_result
-            if result is None:
-                raise replay.ReplayError(f"frame {frame} did not render (see the messages above)")
+            if result is None:  # a failed render raises RuntimeError: this one was stopped
+                for image in self.frames_dir.glob(f"{frame:04d}.*"):
+                    image.unlink()
+                raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
             row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
             row.update({key: result.stats.get(key) for key in replay.EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
             self.log.add_frame(row, result.selection_rows)
             session.last_result = None
+        except ReplayInterrupted:
+            raise
         except BaseException:
             self._close(summary=None)
             raise
         self.done += 1
         return result.stats
 
-    def finish(self, cancelled=False) -> replay.ReplayResult:
-        """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore the scene."""
+    def finish(self, cancelled=False, restore_scene=True) -> replay.ReplayResult:
+        """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
+        the scene (``restore_scene=False`` when Blender is discarding it)."""
         if not self._open:
             raise ValueError("SteppedReplay: already finished")
         cancelled = bool(cancelled and self.remaining)
-        width, height = extract.resolution(self.scene)
-        start, end = self.frame_range
-        summary = {
-            "scene": self.scene_label or self.scene.name, "path": self.camera.name, "resolution": [width, height],
-            "images": self.images, "frame_range": [start, end], "cancelled": cancelled,
-            "cost_mode": self.settings.cost_mode, "selection_weight": self.settings.selection_weight,
-            "max_area_fraction": self.settings.max_area_fraction, **replay.versions()}
-        written = self._close(summary=summary)
+        written = self._close(summary={**self._summary, "cancelled": cancelled}, restore_scene=restore_scene)
         return replay.ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
                                    cancelled=cancelled, summary=written)
 
-    def _close(self, summary):
+    def _close(self, summary, restore_scene=True):
         if not self._open:
             return None
         self._open = False
@@ -163,7 +171,8 @@ class SteppedReplay:
                 self.log.__exit__(None, None, None)  # keep the complete rows, no summary
         finally:
             self.session.__exit__(None, None, None)
-            self._restore()
+            if restore_scene:
+                self._restore()
         return written
 
     def _restore(self):
@@ -347,6 +356,8 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                 self._mode_index += 1
                 if self._mode_index == len(self._modes):
                     return self._stop(context, cancelled=False)
+        except ReplayInterrupted:  # Esc while a frame was rendering
+            return self._stop(context, cancelled=True)
         except (replay.ReplayError, RuntimeError) as error:
             self._run = None  # step() already closed its logs and restored the scene
             self._cleanup(context)
@@ -355,8 +366,15 @@ class PHRT_OT_replay_path(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def cancel(self, context):
-        """Blender ends the operator (file loaded, window closed): keep what was rendered."""
-        self._stop(context, cancelled=True)
+        """Blender ends the operator itself (a file is loaded, the window closes): close the run
+        so what was rendered stays valid, without touching a scene that may be gone."""
+        if self._run is not None:
+            self._run.finish(cancelled=True, restore_scene=False)
+            self._run = None
+        if self._timer is not None:
+            context.window_manager.event_timer_remove(self._timer)
+            self._timer = None
+        context.window_manager.progress_end()
 
     def _stop(self, context, cancelled):
         if self._run is not None:

@@ -11,8 +11,11 @@ traced, as in a frame:
 Each set goes once through our wrapper (``TraceScene.intersect`` / ``occluded``:
 float32 conversion, thread pool, merging of the scene sets) and once through
 the very same Embree scene's ``EmbreeScene.run`` in a single call (embreex's
-own serial loop), in the same run.  The table gives the median ms of a few
-repeats, throughput in Mrays/s and ours/raw (above 1: the pool beats one call).
+own serial loop), in the same run; a second ``TraceScene`` with one thread
+shows the wrapper's own overhead without the pool.  Runs of the three paths
+alternate, so that a slow patch of a shared machine hits them alike; the
+table gives the median ms, throughput in Mrays/s and raw ms / ours ms (above
+1: the pool beats one call).
 
 No bpy; ``make bench`` calls :func:`run`.
 """
@@ -28,8 +31,8 @@ from .tracer import TraceScene, ray_epsilon, worker_count
 
 WIDTH, HEIGHT = 640, 480
 REPEATS = 5
-SPHERE_SEGMENTS, SPHERE_RINGS = 24, 12  # 552 triangles per sphere (poles are fans)
-N_SPHERES, N_BOXES = 340, 300
+SPHERE_SEGMENTS, SPHERE_RINGS = 24, 12  # 528 triangles per sphere (poles are fans)
+N_SPHERES, N_BOXES = 372, 300
 SUN_DIRECTION = (0.35, 0.25, -1.0)
 TARGET_RATIO = 0.8
 
@@ -116,14 +119,17 @@ def camera_rays(eye=(0.0, -22.0, 9.0), target=(0.0, 0.0, 0.0), fov_degrees=60.0)
     return np.broadcast_to(eye, directions.shape).copy(), directions
 
 
-def _median_ms(function, repeats):
-    function()  # warm-up (first-touch allocations, thread start)
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
+def _median_ms(functions, repeats):
+    """Median ms of each function, their runs interleaved (after one warm-up run each)."""
+    for function in functions:
         function()
-        times.append((time.perf_counter() - start) * 1000.0)
-    return float(np.median(times))
+    times = [[] for _ in functions]
+    for _ in range(repeats):
+        for function, samples in zip(functions, times):
+            start = time.perf_counter()
+            function()
+            samples.append((time.perf_counter() - start) * 1000.0)
+    return [float(np.median(samples)) for samples in times]
 
 
 def ray_sets(trace_scene, origins_world, directions):
@@ -150,52 +156,74 @@ def ray_sets(trace_scene, origins_world, directions):
     }
 
 
+def _queries(trace_scene, embree_scene, effect, origins, directions, dists):
+    """(ours, raw, same_answers) for one ray set."""
+    if effect == "shadow":
+        def ours():
+            return trace_scene.occluded(origins, directions, dists)
+
+        def raw():
+            return embree_scene.run(origins, directions, dists=dists.copy(), query="OCCLUDED")
+
+        return ours, raw, bool(np.array_equal(ours(), np.asarray(raw()) != -1))
+
+    def ours():
+        return trace_scene.intersect(origins, directions)
+
+    def raw():
+        return embree_scene.run(origins, directions, output=1)
+
+    raw_out = raw()
+    raw_t = np.where(raw_out["geomID"] != -1, raw_out["tfar"], np.inf).astype(np.float32)
+    return ours, raw, bool(np.array_equal(ours()["t"].astype(np.float32), raw_t))
+
+
 def run(out=print, repeats=REPEATS):
-    """Build the scene, trace the three ray sets both ways, print the table; returns the rows."""
-    import embreex
-
+    """Build the scene, trace the three ray sets three ways, print the table; returns the rows."""
     snapshot = bench_scene()
-    trace_scene = TraceScene()
+    transparent = np.zeros(len(snapshot.materials), bool)
+    pooled, single = TraceScene(), TraceScene(threads=1)
     try:
-        upload_ms = trace_scene.update(snapshot, np.zeros(len(snapshot.materials), bool))
-        embree_scene = next(s.scene for kind, s in trace_scene._static if kind == "opaque" and not s.empty)
+        upload_ms = pooled.update(snapshot, transparent)
+        single.update(snapshot, transparent)
+        embree_scene = next(s.scene for kind, s in pooled._static if kind == "opaque" and not s.empty)
         origins_world, directions = camera_rays()
-        sets = ray_sets(trace_scene, origins_world, directions)
         rows = []
-        for effect, (origins, rays_directions, dists) in sets.items():
+        for effect, (origins, rays_directions, dists) in ray_sets(pooled, origins_world, directions).items():
+            ours, raw, same = _queries(pooled, embree_scene, effect, origins, rays_directions, dists)
+            ours_single, _, same_single = _queries(single, embree_scene, effect, origins, rays_directions, dists)
+            ours_ms, single_ms, raw_ms = _median_ms((ours, ours_single, raw), repeats)
             n = len(origins)
-            if effect == "shadow":
-                ours = lambda: trace_scene.occluded(origins, rays_directions, dists)  # noqa: E731
-                raw = lambda: embree_scene.run(origins, rays_directions, dists=dists.copy(),  # noqa: E731
-                                               query="OCCLUDED")
-                same = np.array_equal(ours(), np.asarray(raw()) != -1)
-            else:
-                ours = lambda: trace_scene.intersect(origins, rays_directions)  # noqa: E731
-                raw = lambda: embree_scene.run(origins, rays_directions, output=1)  # noqa: E731
-                ours_t, raw_out = ours()["t"], raw()
-                raw_t = np.where(raw_out["geomID"] != -1, raw_out["tfar"], np.inf)
-                same = np.array_equal(ours_t.astype(np.float32), raw_t.astype(np.float32))
-            ours_ms = _median_ms(ours, repeats)
-            raw_ms = _median_ms(raw, repeats)
-            rows.append({"effect": effect, "rays": n, "ours_ms": ours_ms, "raw_ms": raw_ms,
-                         "ours_mrays_s": n / ours_ms / 1e3, "raw_mrays_s": n / raw_ms / 1e3,
-                         "ratio": raw_ms / ours_ms, "same_answers": bool(same)})
+            rows.append({"effect": effect, "rays": n, "ours_ms": ours_ms, "ours_1thread_ms": single_ms,
+                         "raw_ms": raw_ms, "ours_mrays_s": n / ours_ms / 1e3, "raw_mrays_s": n / raw_ms / 1e3,
+                         "ratio": raw_ms / ours_ms, "ratio_1thread": raw_ms / single_ms,
+                         "same_answers": same and same_single})
     finally:
-        trace_scene.close()
+        pooled.close()
+        single.close()
 
-    out(f"PHRT trace benchmark: {snapshot.n_triangles:,} triangles in {len(snapshot.meshes)} meshes, "
-        f"{WIDTH}x{HEIGHT} camera, {trace_scene.threads} worker threads, embreex {embreex.__version__ if hasattr(embreex, '__version__') else '?'}")
-    out(f"upload + BVH build: {upload_ms:.0f} ms; median of {repeats} runs per cell")
-    out(f"{'effect':<11} {'rays':>8} {'ours ms':>8} {'raw ms':>8} {'ours Mray/s':>12} {'raw Mray/s':>11} "
-        f"{'ours/raw':>9} {'same':>5}")
+    version = _embreex_version()
+    out(f"Trace benchmark: {snapshot.n_triangles:,} triangles in {len(snapshot.meshes)} meshes, "
+        f"{WIDTH}x{HEIGHT} camera rays, {pooled.threads} worker threads, embreex {version}")
+    out(f"upload + BVH build {upload_ms:.0f} ms; median of {repeats} interleaved runs per cell")
+    out(f"{'effect':<11} {'rays':>8} {'ours ms':>8} {'1-thr ms':>9} {'raw ms':>7} {'ours Mray/s':>12} "
+        f"{'raw Mray/s':>11} {'ours/raw':>9} {'1-thr/raw':>10} {'same':>5}")
     for row in rows:
-        out(f"{row['effect']:<11} {row['rays']:>8,} {row['ours_ms']:>8.1f} {row['raw_ms']:>8.1f} "
-            f"{row['ours_mrays_s']:>12.2f} {row['raw_mrays_s']:>11.2f} {row['ratio']:>9.2f} "
-            f"{'yes' if row['same_answers'] else 'NO':>5}")
+        out(f"{row['effect']:<11} {row['rays']:>8,} {row['ours_ms']:>8.1f} {row['ours_1thread_ms']:>9.1f} "
+            f"{row['raw_ms']:>7.1f} {row['ours_mrays_s']:>12.2f} {row['raw_mrays_s']:>11.2f} "
+            f"{row['ratio']:>9.2f} {row['ratio_1thread']:>10.2f} {'yes' if row['same_answers'] else 'NO':>5}")
     worst = min(row["ratio"] for row in rows)
     out(f"ours/raw throughput: worst {worst:.2f} (target >= {TARGET_RATIO:.2f}: "
         f"{'met' if worst >= TARGET_RATIO else 'NOT met'})")
     return rows
+
+
+def _embreex_version():
+    try:
+        from importlib.metadata import version
+        return version("embreex")
+    except Exception:  # not installed as a distribution (a bundled wheel in Blender)
+        return "?"
 
 
 if __name__ == "__main__":

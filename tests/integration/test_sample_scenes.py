@@ -345,8 +345,8 @@ def test_tags_materials_and_lights():
                 assert bsdf is not None and bsdf.outputs[0].is_linked, slot.material.name
         for mat in bpy.data.materials:
             bsdf = mat.node_tree.nodes["Principled BSDF"].inputs
-            if bsdf["Metallic"].default_value == 1.0 and mat.name.startswith("Mirror"):
-                assert bsdf["Roughness"].default_value <= 0.05
+            if mat.name == "Mirror":
+                assert bsdf["Metallic"].default_value == 1.0 and bsdf["Roughness"].default_value <= 0.05
             if bsdf["Transmission Weight"].default_value == 1.0:
                 assert bsdf["Roughness"].default_value == 0.0
                 expected = (1.33, 1.33) if mat.name == "Water" else (1.45, 1.5)

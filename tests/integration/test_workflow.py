@@ -462,6 +462,32 @@ def test_stepped_replay_cancelled_by_esc_keeps_what_was_rendered(scene, tmp_path
     assert scene.frame_current == 1 and scene.render.filepath == filepath
 
 
+def test_stepped_replay_stopped_during_a_render_drops_that_frame(scene, tmp_path, monkeypatch):
+    """Esc while a frame renders: the engine returns without a result (test_break); the
+    frame's rows are dropped, the frames before it stay complete.  (Without images: an
+    engine that writes no result and write_still=True crashes Blender 5.0.1 in background.)"""
+    from phrt.operators.replay_path import ReplayInterrupted, SteppedReplay
+    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
+    run.step()
+    run.step()
+    monkeypatch.setattr(final.FinalRender, "render", lambda self, depsgraph: None)
+    with pytest.raises(ReplayInterrupted):
+        run.step()
+    assert run.done == 2
+    run.finish(cancelled=True)
+    _, _, summary = check_run(tmp_path / "run", [1, 2], "RASTER", images="none")
+    assert summary["cancelled"] is True
+
+
+def test_stepped_replay_closed_by_blender_leaves_the_scene_alone(scene, tmp_path):
+    from phrt.operators.replay_path import SteppedReplay
+    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
+    run.step()
+    run.finish(cancelled=True, restore_scene=False)
+    assert scene.render.engine == "PHRT" and scene.frame_current == 1  # as the replay left it
+    assert runlog.read_summary(tmp_path / "run")["frame_count"] == 1
+
+
 def test_stepped_replay_writes_what_replay_writes(scene, tmp_path):
     from phrt.operators.replay_path import SteppedReplay
     replay.replay(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "blocking", images="none")
