@@ -13,7 +13,6 @@ flushed, so a cancelled replay leaves complete frames and logs only.
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from pathlib import Path
 
@@ -181,6 +180,9 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
                 wall_ms = (time.perf_counter() - begin) * 1000.0
                 result = session.last_result
                 if result is None:
+                    if should_stop is not None and should_stop():
+                        cancelled = True  # stopped in the middle of this frame: it is not kept
+                        break
                     raise ReplayError(f"frame {frame} did not render (see the messages above)")
                 row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
                 row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
@@ -217,11 +219,3 @@ EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gpu_upload_ms", "upload_ms", "s
 
 def default_run_dir(out_root, scene_label, camera_name, mode) -> Path:
     return Path(out_root) / f"{scene_label}-{camera_name}-{mode.lower()}"
-
-
-def ensure_writable_parent(path) -> None:
-    parent = Path(path)
-    while not parent.exists():
-        parent = parent.parent
-    if not os.access(parent, os.W_OK):
-        raise ReplayError(f"cannot write to output folder '{path}': permission denied")

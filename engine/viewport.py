@@ -13,7 +13,7 @@ The overlay (any shading mode): each element of the last final frame
 ``overlay_colors(rows)`` is the tested data, ``draw_overlay`` the GPU drawing,
 which needs a window (never runs in background mode).
 
-Never reads ``bpy.context`` outside the callbacks that receive a context.
+Only the overlay's draw handler reads ``bpy.context`` (draw handlers get no context).
 """
 from __future__ import annotations
 
@@ -228,15 +228,18 @@ def render_view(depsgraph, camera: Camera, renderer: FrameRenderer):
         gbuffer = raster_pass.render_gbuffer()
         if snapshot.meshes:
             bounds = snapshot.bounds()
+            keys = set()
             for index, light in enumerate(snapshot.lights):
                 if not light.cast_shadows:
                     continue
                 key = final._shadow_key(light, snapshot, snapshot.settings.shadow_map_size)
+                keys.add(key)
                 maps = raster.SHADOW_MAP_CACHE.get(key)
                 if maps is None:
                     maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
                     raster.SHADOW_MAP_CACHE.put(key, maps)
                 shadow_maps[index] = maps
+            raster.SHADOW_MAP_CACHE.retain(keys)  # a light dragged around must not pile up maps
     raster_ms = (time.perf_counter() - start) * 1000.0
     result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms)
     result.stats["extract_ms"] = extract_ms

@@ -12,6 +12,7 @@ Two ways to run, same files:
 
 ``SteppedReplay`` is ``engine.replay.replay()`` cut into steps for the modal path;
 it writes exactly what ``replay()`` writes (a test compares the two).
+docs/batch.md has the ``blender -b`` command lines.
 """
 from __future__ import annotations
 

@@ -44,6 +44,16 @@ def decision_key(rendered, selected, reason) -> str:
     return "selected" if selected else (reason if reason in DECISIONS else "")
 
 
+def live_settings(item):
+    """The Object.phrt or Material.phrt an entry was listed from (None once it is deleted),
+    so the list shows K and effects as they are now, not as at the last refresh."""
+    if item.material_name:
+        owner = bpy.data.materials.get(item.material_name)
+    else:
+        owner = bpy.data.objects.get(item.object_name)
+    return owner.phrt if owner is not None else None
+
+
 def _settings_entry(name, object_name, material_name, settings, candidate):
     return {"name": name, "object_name": object_name, "material_name": material_name or "",
             "candidate": bool(candidate), "priority": float(settings.priority), "effects": effects_text(settings),
@@ -169,7 +179,8 @@ class PHRT_UL_candidates(bpy.types.UIList):
         row.label(text=item.name, icon=status_icon)
         values = row.row(align=True)
         values.alignment = "RIGHT"
-        values.label(text=f"K {item.priority:.3g}")
+        settings = live_settings(item)
+        values.label(text=f"K {settings.priority if settings is not None else item.priority:.3g}")
         values.label(text=f"R {item.relevance:.3g}" if item.rendered else "R -")
 
     def draw_filter(self, context, layout):

@@ -161,7 +161,10 @@ def _draw_candidate_details(layout, item):
     text, icon = candidates.DECISIONS[candidates.decision_key(item.rendered, item.selected, item.reason)]
     layout.label(text=item.name, icon=icon)
     column = layout.column(align=True)
-    column.label(text=f"Priority K {item.priority:.3g}   Effects {item.effects}")
+    settings = candidates.live_settings(item)
+    priority, effects = ((settings.priority, candidates.effects_text(settings)) if settings is not None
+                         else (item.priority, item.effects))
+    column.label(text=f"Priority K {priority:.3g}   Effects {effects}")
     if item.rendered:
         column.label(text=f"V {item.visibility:.3g}   C {item.cost:.3g}   R {item.relevance:.3g}")
     column.label(text=text)

@@ -125,6 +125,13 @@ class TraceScene:
         changed = {name for name, value in state.items()
                    if name in self._static_state and self._static_state[name] != value}
         removed = set(self._static_state) - set(state)
+        if self._static_state and not set(self._static_state) - changed - removed:
+            # Nothing of the static scene is left (another file with the same object names, or
+            # everything moved): start over, centred on the new geometry, so that a scene far from
+            # the old origin keeps its float32 precision and a fitting ray epsilon.
+            self.origin = None
+            self._static_state, self._dynamic_names, self._static = {}, set(), []
+            changed, removed = set(), set()
         if self.origin is None:
             low, high = snapshot.bounds()
             self.origin = (low + high) / 2.0

@@ -6,7 +6,7 @@ built with numpy and drive TraceScene / RadianceTracer directly."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import shading, tracer
+from phrt.phrt_addon import shading, shadowmap, tracer
 from phrt.phrt_addon.scene import Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings
 from phrt.phrt_addon.tracer import RadianceTracer, TraceScene
 
@@ -439,6 +439,22 @@ def test_moved_object_is_traced_where_it_is_now(closing):
     assert np.isinf(scene.intersect(scene.to_trace(up), np.array([[0.0, 0.0, 1.0]]))["t"][0])
 
 
+def test_trace_scene_starts_over_when_the_whole_scene_is_replaced(closing):
+    """Another file with the same object names far away (1e5): no shadow acne from a stale origin."""
+    scene, _ = build(shadow_scene(1.0, 0.0)[0], threads=1)
+    closing(scene)
+    snap, shift = shadow_scene(1.0, 1e5)
+    transparent = np.zeros(len(snap.materials), bool)
+    scene.update(snap, transparent)
+    np.testing.assert_allclose(scene.origin, shift + [0.0, 0.0, 0.5])
+    assert scene.stats["dynamic_triangles"] == 0  # all of it is static again
+    radiance_tracer = RadianceTracer(scene, snap, shading.MaterialTable(snap.materials))
+    points = shift + np.c_[np.linspace(1.0, 2.9, 500), np.linspace(-2.9, 2.9, 500), np.zeros(500)]
+    eye = shift + np.array([2.0, 0.0, 3.0])
+    color = radiance_tracer.radiance(scene.to_trace(np.tile(eye, (500, 1))), shading.normalize(points - eye), 0)
+    assert np.all(color[:, 0] > 0.8 * 0.5 / np.pi * -SUN_DIRECTION[2])
+
+
 def test_glass_does_not_cast_shadows_but_is_hit_by_radiance_rays(closing):
     materials = [diffuse("grey"), GLASS]
     meshes = [quad("floor", (0, 0, 0), 10, 10, "+z", material=0), box("glass", (-1, -1, 1), (1, 1, 2), material=1)]
@@ -508,3 +524,71 @@ def test_ray_epsilon_scales_with_magnitude_and_scene_size():
     # Several float32 ulps of the coordinate, far below the scene's size.
     assert 4 * np.spacing(np.float32(1e-3)) < small < 1e-3 * 1e-3
     assert 4 * np.spacing(np.float32(1e5)) < large < 1e-3 * 1e5
+
+
+# -- raster shadow maps against traced shadows ------------------------------------------------------
+
+def raycast_shadow_maps(snap, light, size):
+    """The depth maps ``engine/raster.py`` draws on the GPU, made by tracing one ray per texel
+    centre through the same light views (window depth, row 0 at the bottom)."""
+    scene = TraceScene(threads=1)
+    try:
+        scene.update(snap, np.zeros(len(snap.materials), bool))
+        maps = []
+        for view in shadowmap.light_views(light, snap.bounds(), size):
+            centres = (np.arange(view.size) + 0.5) / view.size * 2.0 - 1.0
+            x, y = np.meshgrid(centres, centres)
+            inverse = np.linalg.inv(view.view_proj_relative)
+
+            def unproject(z):
+                clip = np.stack([x, y, np.full_like(x, z), np.ones_like(x)], axis=-1).reshape(-1, 4) @ inverse.T
+                return clip[:, :3] / clip[:, 3:4]
+
+            near, far = unproject(-1.0), unproject(1.0)
+            directions = shading.normalize(far - near)
+            t = scene.intersect(scene.to_trace(near + view.origin), directions)["t"]
+            points = near + directions * np.where(np.isfinite(t), t, 0.0)[:, None]
+            clip = np.c_[points, np.ones(len(points))] @ view.view_proj_relative.T
+            depth = np.where(np.isfinite(t), clip[:, 2] / clip[:, 3] * 0.5 + 0.5, 1.0)
+            maps.append(shadowmap.ShadowMap(view=view, depth=depth.reshape(view.size, view.size).astype(np.float32)))
+        return maps
+    finally:
+        scene.close()
+
+
+LIGHTS = {
+    "sun": Light("sun", "SUN", (1.0, 1.0, 1.0), direction=tuple(shading.normalize(np.array([0.4, 0.3, -1.0])))),
+    "spot": Light("spot", "SPOT", (500.0, 500.0, 500.0), position=(-1.0, -1.5, 5.0),
+                  direction=tuple(shading.normalize(np.array([0.2, 0.3, -1.0]))), spot_size=np.radians(100.0)),
+    "point": Light("point", "POINT", (500.0, 500.0, 500.0), position=(0.5, -0.5, 3.0)),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(LIGHTS))
+def test_shadow_map_lookup_agrees_with_traced_shadows_away_from_edges(kind, closing):
+    light = LIGHTS[kind]
+    meshes = [quad("floor", (0, 0, 0), 12, 12, "+z"), box("block", (-0.6, -0.4, 0.0), (0.4, 0.6, 1.2)),
+              uv_sphere("ball", (1.8, 1.2, 0.8), 0.5, 32, 16), box("post", (-2.0, 1.5, 0.0), (-1.9, 1.6, 2.0))]
+    snap = snapshot(meshes, [diffuse("grey")], [light])
+    maps = raycast_shadow_maps(snap, light, 512)
+    scene, _ = build(snap)
+    closing(scene)
+    rng = np.random.default_rng(5)
+    points = np.c_[rng.uniform(-5.5, 5.5, (20000, 2)), np.zeros(20000)]
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+
+    def traced_lit(world):
+        trace = scene.to_trace(world)
+        direction, distance, _ = shading.light_incidence(light, trace, scene.origin)
+        eps = tracer.ray_epsilon(trace, scene.extent)
+        return ~scene.occluded(trace + normals[: len(trace)] * eps[:, None], direction, distance - 2 * eps)
+
+    lit = traced_lit(points)
+    texel = 3.0 * max(m.view.texel_angle * (1.0 if m.view.ortho else 8.0) for m in maps)
+    sure = np.ones(len(points), bool)
+    for offset in ([1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]):
+        sure &= traced_lit(points + texel * np.array(offset, float)) == lit
+    visibility = shadowmap.shadow_visibility(maps, points, normals)
+    assert (~lit & sure).sum() > 200
+    agree = np.mean((visibility[sure] > 0.5) == lit[sure])
+    assert agree > 0.995, f"{kind}: shadow map and tracer agree on {agree:.2%} of the floor away from edges"

@@ -203,7 +203,7 @@ def test_hybrid_traces_the_mirror_sphere_given_the_budget(tmp_path):
 # -- 2. glass slab over a checkerboard -----------------------------------------------------------------
 
 SLAB_LOW = np.array([-1.0, -1.0, 0.3])
-SLAB_HIGH = np.array([1.0, 1.0, 0.8])
+SLAB_HIGH = np.array([1.0, 1.0, 0.6])
 SLAB_IOR = 1.5
 CHECKER_CELL = 0.25
 
@@ -288,7 +288,9 @@ def test_checker_seen_through_a_glass_slab_is_shifted_by_snell_law(tmp_path):
     valid, bent_parity, straight_parity = slab_expectations(scene)
     assert valid.sum() > 1000
     differs = (bent_parity != straight_parity) & valid
-    assert differs.sum() > 0.2 * valid.sum()  # bending changes what is seen: the test can tell
+    # Bending changes the cell seen on some pixels and not on others: neither the unbent nor an
+    # inverted checker can pass.
+    assert 0.15 * valid.sum() < differs.sum() < 0.85 * valid.sum()
     traced = render(scene, "RAYTRACE", "slab", tmp_path)
     raster = render(scene, "RASTER", "slab", tmp_path)
     traced_dark = dark_cells(traced["Combined"], valid)
@@ -507,3 +509,16 @@ def test_every_pass_is_finite_in_every_mode(name, tmp_path):
     for mode in MODES:
         render(scene, mode, f"finite-{name}", tmp_path)  # render() asserts every value of every pass is finite
         assert final.LAST_FRAME["stats"]["mode"] == mode
+
+
+def test_a_new_file_far_away_renders_like_the_first(tmp_path):
+    """The standalone renderer is kept per scene name: a new file whose scene is also called
+    'Scene' but lies at 1e5 must not inherit the first one's trace origin (acne, lost shadows)."""
+    first = render(cycles_scene(), "RAYTRACE", "new-file-first", tmp_path)
+    floor = erode((first["PHRT Candidate"][..., 0] == 0) & (first["Depth"][..., 0] < 1e9))
+    scene = cycles_scene()  # read_homefile: a new file, same scene and object names, caches kept
+    move_and_scale_world(scene, 1.0, (1e5, 1e5, 1e5))
+    second = render(scene, "RAYTRACE", "new-file-far", tmp_path)
+    lit_first = lit_fraction(first["Combined"], floor) > 0.5
+    lit_second = lit_fraction(second["Combined"], floor) > 0.5
+    assert np.mean(lit_first[floor] == lit_second[floor]) > 0.995

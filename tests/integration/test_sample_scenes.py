@@ -199,7 +199,7 @@ def test_scene_defaults(snap):
     assert settings["frame_range"] == (1, 1000)
     assert settings["fps"] == 60
     assert settings["resolution"] == (640, 480, 100)
-    assert settings["budget_ms"] == pytest.approx(150.0)
+    assert settings["budget_ms"] == pytest.approx(generate.BUDGET_MS) and 0 < settings["budget_ms"] < 5000
     assert settings["camera"] == "path1"
     assert settings["engine"] in ("PHRT", "CYCLES")
     assert settings["phrt_paths"] == "path1,path2,path3"

@@ -180,30 +180,46 @@ def test_candidate_list_sorts_by_relevance_and_hides_non_candidates(scene):
     assert candidates.relevance_order([0.5, None, 2.0, 0.5]) == [1, 3, 0, 2]
 
 
+ICONS = set(bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items.keys())
+
+
+def check_call(function, kwargs):
+    """The keyword arguments a panel passes to a UILayout function exist, and so do its icons."""
+    parameters = bpy.types.UILayout.bl_rna.functions[function].parameters
+    unknown = [key for key in kwargs if key not in parameters]
+    assert not unknown, f"UILayout.{function}() has no {unknown}"
+    assert kwargs.get("icon", "NONE") in ICONS, f"no icon {kwargs['icon']!r}"
+
+
 class FakeLayout:
-    """Records what a panel draws and checks every property and operator it names exists."""
+    """Records what a panel draws and checks every property, operator, icon and argument it names."""
 
     def __init__(self, log):
-        self.log = log
-        self.use_property_split = self.use_property_decorate = False
-        self.active = self.enabled = True
-        self.alignment = "EXPAND"
-        self.scale_y = 1.0
-        self.operator_context = "INVOKE_DEFAULT"
+        object.__setattr__(self, "log", log)
 
-    def _child(self, *args, **kwargs):
-        return FakeLayout(self.log)
+    def __setattr__(self, name, value):
+        assert name in bpy.types.UILayout.bl_rna.properties, f"UILayout has no attribute {name!r}"
+        object.__setattr__(self, name, value)
 
-    row = column = box = split = grid_flow = column_flow = _child
+    def _child(function):
+        def child(self, **kwargs):
+            check_call(function, kwargs)
+            return FakeLayout(self.log)
+        return child
 
-    def label(self, text="", icon="NONE", **kwargs):
-        self.log.append(("label", text))
+    row, column, box, grid_flow = _child("row"), _child("column"), _child("box"), _child("grid_flow")
+
+    def label(self, **kwargs):
+        check_call("label", kwargs)
+        self.log.append(("label", kwargs.get("text", "")))
 
     def prop(self, data, name, **kwargs):
+        check_call("prop", kwargs)
         assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
         self.log.append(("prop", name))
 
     def operator(self, idname, **kwargs):
+        check_call("operator", kwargs)
         module, name = idname.split(".")
         rna = getattr(getattr(bpy.ops, module), name).get_rna_type()
         self.log.append(("operator", idname))
@@ -212,6 +228,7 @@ class FakeLayout:
         return properties
 
     def template_list(self, list_type, list_id, data, propname, active_data, active_propname, **kwargs):
+        check_call("template_list", kwargs)
         assert hasattr(bpy.types, list_type), list_type
         assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
         self.log.append(("list", list_type))
@@ -263,7 +280,8 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     context = panel_context(scene)
     logs = {panel.__name__: draw_panel(panel, context) for panel in view3d.PANELS}
     props = lambda name: [item[1] for item in logs[name] if item[0] == "prop"]  # noqa: E731
-    assert {"candidate", "priority", "rt_cost", "shadows", "reflections", "refractions"} <= set(props("PHRT_PT_element"))
+    assert {"candidate", "priority", "rt_cost", "shadows", "reflections",
+            "refractions"} <= set(props("PHRT_PT_element"))
     assert ("operator", "phrt.copy_settings_to_selected") in logs["PHRT_PT_element"]
     assert {"mode", "budget_ms", "selection_weight", "max_area_fraction", "max_bounces",
             "cost_mode"} <= set(props("PHRT_PT_renderer"))
@@ -283,6 +301,9 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     item = bpy.context.window_manager.phrt_candidates["MirrorSphere"]
     candidates.PHRT_UL_candidates.draw_item(None, context, FakeLayout(log), None, item, 0, None, "", 0)
     assert ("label", "MirrorSphere") in log and ("label", "K 2") in log
+    mirror.phrt.priority = 5.0  # the list shows the settings as they are now
+    candidates.PHRT_UL_candidates.draw_item(None, context, FakeLayout(log), None, item, 0, None, "", 0)
+    assert ("label", "K 5") in log
 
 
 def test_replay_panel_button_runs_the_replay_it_shows(scene, tmp_path):
@@ -591,43 +612,107 @@ def test_viewport_size_keeps_the_region_aspect_within_the_pixel_cap():
     assert viewport.preview_size(0, 0) == (1, 1)
 
 
-class ViewportProbe(bpy.types.RenderEngine):
-    """Runs the viewport's render path inside render(), the only GPU context in background mode."""
+class GPUProbe(bpy.types.RenderEngine):
+    """Runs ``GPUProbe.job(engine, depsgraph)`` inside render(): the only GPU context in background mode."""
 
-    bl_idname = "PHRT_TEST_VIEWPORT_PROBE"
-    bl_label = "PHRT viewport probe"
+    bl_idname = "PHRT_TEST_GPU_PROBE"
+    bl_label = "PHRT GPU probe"
     bl_use_gpu_context = True
+    job = None
     result = None
+    error = None
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
 
     def render(self, depsgraph):
-        from phrt.phrt_addon.frame import FrameRenderer
-        scene = depsgraph.scene_eval
-        camera = scene.camera.evaluated_get(depsgraph)
-        projection = camera.calc_matrix_camera(depsgraph, x=WIDTH, y=HEIGHT)
-        view = viewport.view_camera(np.array(camera.matrix_world.inverted()), np.array(projection), WIDTH, HEIGHT)
-        renderer = FrameRenderer()
         try:
-            type(self).result = viewport.render_view(depsgraph, view, renderer)
-        finally:
-            renderer.close()
+            type(self).result = type(self).job(self, depsgraph)
+        except Exception as error:  # re-raised by run_on_gpu
+            type(self).error = error
 
 
-def test_viewport_path_renders_what_the_final_render_renders(scene, tmp_path):
-    scene.phrt.mode = "RAYTRACE"
-    final_render = render_passes(scene, tmp_path / "final")
-    bpy.utils.register_class(ViewportProbe)
+def run_on_gpu(scene, job):
+    GPUProbe.job, GPUProbe.result, GPUProbe.error = job, None, None
+    bpy.utils.register_class(GPUProbe)
     try:
-        scene.render.engine = ViewportProbe.bl_idname
+        scene.render.engine = GPUProbe.bl_idname
         bpy.ops.render.render()
     finally:
         scene.render.engine = "PHRT"
-        bpy.utils.unregister_class(ViewportProbe)
-    result = ViewportProbe.result
-    assert result is not None and result.stats["n_selected"] == 3
+        bpy.utils.unregister_class(GPUProbe)
+    if GPUProbe.error is not None:
+        raise GPUProbe.error
+    return GPUProbe.result
+
+
+def scene_camera_view(depsgraph, width, height):
+    """The scene camera's view and projection matrices, as a RegionView3D would give them."""
+    camera = depsgraph.scene_eval.camera.evaluated_get(depsgraph)
+    projection = camera.calc_matrix_camera(depsgraph, x=width, y=height)
+    return camera.matrix_world.inverted(), projection
+
+
+def test_viewport_path_renders_what_the_final_render_renders(scene, tmp_path):
+    from phrt.phrt_addon.frame import FrameRenderer
+    scene.phrt.mode = "RAYTRACE"
+    final_render = render_passes(scene, tmp_path / "final")
+
+    def job(engine, depsgraph):
+        view, projection = scene_camera_view(depsgraph, WIDTH, HEIGHT)
+        camera = viewport.view_camera(np.array(view), np.array(projection), WIDTH, HEIGHT)
+        renderer = FrameRenderer()
+        try:
+            return viewport.render_view(depsgraph, camera, renderer)
+        finally:
+            renderer.close()
+
+    result = run_on_gpu(scene, job)
+    assert result.stats["n_selected"] == 3
     combined = result.passes.combined[::-1, :, :3]  # bottom row first -> top row first
     assert combined.shape == (HEIGHT, WIDTH, 3)
     assert np.abs(combined - rgb(final_render)).mean() < 1e-3
     assert np.abs(rgb(final_render)).mean() > 0.1  # not two black images
+
+
+def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_change(scene, tmp_path):
+    """ViewportRender.draw() as view_draw calls it, with a fake region drawing into an offscreen."""
+    import gpu
+    from mathutils import Matrix
+    final_render = render_passes(scene, tmp_path / "final")
+
+    def job(engine, depsgraph):
+        view, projection = scene_camera_view(depsgraph, WIDTH, HEIGHT)
+        context = types.SimpleNamespace(
+            region=types.SimpleNamespace(width=WIDTH, height=HEIGHT),
+            region_data=types.SimpleNamespace(view_matrix=view, window_matrix=projection, is_perspective=True),
+            space_data=types.SimpleNamespace(clip_start=0.05, clip_end=100.0))
+        view_render = viewport.ViewportRender()
+        offscreen = gpu.types.GPUOffScreen(WIDTH, HEIGHT, format="RGBA16F")
+        textures = []
+        try:
+            with offscreen.bind():
+                framebuffer = gpu.state.active_framebuffer_get()
+                framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
+                with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+                    gpu.matrix.load_matrix(Matrix.Identity(4))
+                    gpu.matrix.load_projection_matrix(Matrix.Identity(4))
+                    gpu.matrix.translate((-1.0, -1.0))
+                    gpu.matrix.scale((2.0 / WIDTH, 2.0 / HEIGHT))  # region pixels, as in view_draw
+                    for update in (False, False, True):
+                        if update:
+                            view_render.update(depsgraph)
+                        view_render.draw(engine, context, depsgraph)
+                        textures.append(view_render.texture)
+                buffer = gpu.types.Buffer("FLOAT", WIDTH * HEIGHT * 4)
+                framebuffer.read_color(0, 0, WIDTH, HEIGHT, 4, 0, "FLOAT", data=buffer)
+                drawn = np.asarray(buffer).reshape(HEIGHT, WIDTH, 4).copy()
+        finally:
+            offscreen.free()
+        return drawn, textures
+
+    drawn, textures = run_on_gpu(scene, job)
+    assert textures[0] is textures[1]  # nothing changed: the cached image is drawn again
+    assert textures[2] is not textures[1]  # view_update: rendered again
+    image = drawn[::-1, :, :3]
+    assert np.abs(image - rgb(final_render)).mean() < 0.01  # half-float texture of the same frame
