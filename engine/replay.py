@@ -118,99 +118,175 @@ class ReplayResult:
     summary: dict | None
 
 
-def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None, resolution=None,
-           scene_label=None, on_progress=None, should_stop=None) -> ReplayResult:
-    """Render ``frame_range`` of ``camera`` in ``mode`` into ``run_dir``.
+class ReplayInterrupted(ReplayError):
+    """The frame's render was stopped (Esc during a render): nothing of it was kept."""
 
-    ``on_progress(done, total, frame_ms)`` is called after each frame;
-    ``should_stop()`` is polled between frames (Esc in the UI)."""
-    mode = mode.upper()
-    if mode not in MODES:
-        raise ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in MODES)}")
-    if images not in IMAGE_FORMATS:
-        raise ReplayError(f"unknown image format '{images}': use exr, png or none")
-    if budget_ms is not None and not budget_ms >= 0:
-        raise ReplayError(f"budget must be a number of milliseconds >= 0, not {budget_ms}")
-    run_dir = Path(run_dir)
-    frames_dir = run_dir / runlog.FRAMES_DIR
-    try:
-        frames_dir.mkdir(parents=True, exist_ok=True)
-        probe = run_dir / ".phrt-write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as error:
-        raise ReplayError(f"cannot write to output folder '{run_dir}': {error.strerror or error}") from None
 
-    settings = extract.read_settings(scene)
-    settings.mode = mode
-    if budget_ms is not None:
-        settings.budget_ms = float(budget_ms)
-    render = scene.render
-    saved = {"camera": scene.camera, "frame": scene.frame_current, "filepath": render.filepath,
-             "res": (render.resolution_x, render.resolution_y, render.resolution_percentage),
-             "engine": render.engine, "use_ext": render.use_file_extension}
-    image_saved = {key: getattr(render.image_settings, key) for key in
-                   ("file_format", "color_depth", "color_mode") if hasattr(render.image_settings, key)}
-    if hasattr(render.image_settings, "media_type"):
-        image_saved = {"media_type": render.image_settings.media_type, **image_saved}
-    scene.camera = camera
-    render.engine = "PHRT"
-    if resolution is not None:
-        render.resolution_x, render.resolution_y = resolution
-        render.resolution_percentage = 100
-    _set_image_format(scene, images)
-    render.use_file_extension = True
-    start, end = frame_range
-    total = end - start + 1
-    done = 0
-    cancelled = False
-    summary = None
-    try:
-        # Leaving the RunLog without close() (an error) keeps the complete rows written so far.
-        with runlog.RunLog(run_dir, extra_frame_columns=EXTRA_FRAME_COLUMNS) as log, \
-                final.ReplaySession(settings_override=settings, camera=camera) as session:
-            for frame in range(start, end + 1):
-                if should_stop is not None and should_stop():
-                    cancelled = True
-                    break
-                scene.frame_set(frame)
-                render.filepath = str(frames_dir / f"{frame:04d}")
-                begin = time.perf_counter()
-                bpy.ops.render.render(write_still=images != "none")
-                wall_ms = (time.perf_counter() - begin) * 1000.0
-                result = session.last_result
-                if result is None:
-                    if should_stop is not None and should_stop():
-                        cancelled = True  # stopped in the middle of this frame: it is not kept
-                        break
-                    raise ReplayError(f"frame {frame} did not render (see the messages above)")
-                row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
-                row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
-                row["wall_ms"] = wall_ms
-                log.add_frame(row, result.selection_rows)
-                session.last_result = None
-                done += 1
-                if on_progress is not None:
-                    on_progress(done, total, result.stats["total_ms"])
-            width, height = extract.resolution(scene)
-            summary = log.close({
-                "scene": scene_label or scene.name, "path": camera.name, "resolution": [width, height],
-                "images": images, "frame_range": [start, end], "cancelled": cancelled,
-                "cost_mode": settings.cost_mode, "selection_weight": settings.selection_weight,
-                "max_area_fraction": settings.max_area_fraction, **versions()})
-    finally:
+class SteppedReplay:
+    """A replay one frame per ``step()`` (the modal operator); ``replay()`` loops over it.
+
+    ``run = SteppedReplay(...)``; ``while run.remaining: run.step()``;
+    ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
+    An exception in ``step()`` restores the scene and leaves the complete rows
+    written so far (like ``replay()``); ``ReplayInterrupted`` (the render itself was
+    stopped) leaves the run open for ``finish(cancelled=True)``."""
+
+    def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
+                 resolution=None, scene_label=None):
+        mode = mode.upper()
+        if mode not in MODES:
+            raise ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in MODES)}")
+        if images not in IMAGE_FORMATS:
+            raise ReplayError(f"unknown image format '{images}': use exr, png or none")
+        if budget_ms is not None and not budget_ms >= 0:
+            raise ReplayError(f"budget must be a number of milliseconds >= 0, not {budget_ms}")
+        start, end = frame_range
+        if end < start:
+            raise ReplayError(f"frame range {start}-{end} ends before it starts")
+        self.run_dir = Path(run_dir)
+        self.frames_dir = self.run_dir / runlog.FRAMES_DIR
+        try:
+            self.frames_dir.mkdir(parents=True, exist_ok=True)
+            probe = self.run_dir / ".phrt-write-test"
+            probe.write_text("")
+            probe.unlink()
+        except OSError as error:
+            raise ReplayError(f"cannot write to output folder '{self.run_dir}': "
+                                     f"{error.strerror or error}") from None
+        self.scene, self.mode, self.images = scene, mode, images
+        self.frames = list(range(start, end + 1))
+        self.done = 0
+        self.settings = extract.read_settings(scene)
+        self.settings.mode = mode
+        if budget_ms is not None:
+            self.settings.budget_ms = float(budget_ms)
+        render = scene.render
+        self._saved = {"camera": scene.camera, "frame": scene.frame_current, "filepath": render.filepath,
+                       "res": (render.resolution_x, render.resolution_y, render.resolution_percentage),
+                       "engine": render.engine, "use_ext": render.use_file_extension}
+        self._image_saved = {key: getattr(render.image_settings, key) for key in
+                             ("file_format", "color_depth", "color_mode") if hasattr(render.image_settings, key)}
+        if hasattr(render.image_settings, "media_type"):
+            self._image_saved = {"media_type": render.image_settings.media_type, **self._image_saved}
+        scene.camera = camera
+        render.engine = "PHRT"
+        if resolution is not None:
+            render.resolution_x, render.resolution_y = resolution
+            render.resolution_percentage = 100
+        _set_image_format(scene, images)
+        render.use_file_extension = True
+        width, height = extract.resolution(scene)
+        # Everything summary.json needs, read now: finish() may run when the scene is gone.
+        self._summary = {
+            "scene": scene_label or scene.name, "path": camera.name, "resolution": [width, height],
+            "images": images, "frame_range": [start, end], "cost_mode": self.settings.cost_mode,
+            "selection_weight": self.settings.selection_weight,
+            "max_area_fraction": self.settings.max_area_fraction, **versions()}
+        self.log = runlog.RunLog(self.run_dir, extra_frame_columns=EXTRA_FRAME_COLUMNS)
+        self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
+        self._open = True
+
+    @property
+    def total(self) -> int:
+        return len(self.frames)
+
+    @property
+    def remaining(self) -> int:
+        return self.total - self.done
+
+    def step(self) -> dict:
+        """Render, write and log the next frame; returns its stats."""
+        if not self._open or not self.remaining:
+            raise ValueError("SteppedReplay: no frame left to render")
+        frame = self.frames[self.done]
+        scene, render, session = self.scene, self.scene.render, self.session
+        try:
+            scene.frame_set(frame)
+            render.filepath = str(self.frames_dir / f"{frame:04d}")
+            begin = time.perf_counter()
+            bpy.ops.render.render(write_still=self.images != "none")
+            wall_ms = (time.perf_counter() - begin) * 1000.0
+            result = session.last_result
+            if result is None:  # a failed render raises RuntimeError: this one was stopped
+                for image in self.frames_dir.glob(f"{frame:04d}.*"):
+                    image.unlink()
+                raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
+            row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
+            row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
+            row["wall_ms"] = wall_ms
+            self.log.add_frame(row, result.selection_rows)
+            session.last_result = None
+        except ReplayInterrupted:
+            raise
+        except BaseException:
+            self._close(summary=None)
+            raise
+        self.done += 1
+        return result.stats
+
+    def finish(self, cancelled=False, restore_scene=True) -> ReplayResult:
+        """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
+        the scene (``restore_scene=False`` when Blender is discarding it)."""
+        if not self._open:
+            raise ValueError("SteppedReplay: already finished")
+        cancelled = bool(cancelled and self.remaining)
+        written = self._close(summary={**self._summary, "cancelled": cancelled}, restore_scene=restore_scene)
+        return ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
+                                   cancelled=cancelled, summary=written)
+
+    def _close(self, summary, restore_scene=True):
+        if not self._open:
+            return None
+        self._open = False
+        written = None
+        try:
+            if summary is not None:
+                written = self.log.close(summary)
+            else:
+                self.log.__exit__(None, None, None)  # keep the complete rows, no summary
+        finally:
+            self.session.__exit__(None, None, None)
+            if restore_scene:
+                self._restore()
+        return written
+
+    def _restore(self):
+        scene, render, saved = self.scene, self.scene.render, self._saved
         scene.camera = saved["camera"]
         scene.frame_set(saved["frame"])
         render.filepath = saved["filepath"]
         render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
         render.engine = saved["engine"]
         render.use_file_extension = saved["use_ext"]
-        for key, value in image_saved.items():
+        for key, value in self._image_saved.items():
             try:
                 setattr(render.image_settings, key, value)
             except (TypeError, AttributeError):
                 pass
-    return ReplayResult(run_dir=run_dir, mode=mode, frames_done=done, cancelled=cancelled, summary=summary)
+
+
+
+def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None, resolution=None,
+           scene_label=None, on_progress=None, should_stop=None) -> ReplayResult:
+    """Render ``frame_range`` of ``camera`` in ``mode`` into ``run_dir``.
+
+    ``on_progress(done, total, frame_ms)`` is called after each frame;
+    ``should_stop()`` is polled between frames (Esc in the UI)."""
+    run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
+                        resolution=resolution, scene_label=scene_label)
+    cancelled = False
+    while run.remaining:
+        if should_stop is not None and should_stop():
+            cancelled = True
+            break
+        try:
+            stats = run.step()
+        except ReplayInterrupted:
+            cancelled = True  # stopped in the middle of a frame: that frame is not kept
+            break
+        if on_progress is not None:
+            on_progress(run.done, run.total, stats["total_ms"])
+    return run.finish(cancelled=cancelled)
 
 
 EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gpu_upload_ms", "upload_ms", "setup_ms", "shadow_rays", "reflection_rays",

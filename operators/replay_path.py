@@ -10,21 +10,19 @@ Two ways to run, same files:
 - From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
   ``engine.replay.replay()`` runs every frame of every mode to the end.
 
-``SteppedReplay`` is ``engine.replay.replay()`` cut into steps for the modal path;
-it writes exactly what ``replay()`` writes (a test compares the two).
+The modal path drives ``engine.replay.SteppedReplay`` (of which ``replay()`` is the
+blocking loop), so both write exactly the same files.
 docs/batch.md has the ``blender -b`` command lines.
 """
-from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
-from ..engine import extract, final, replay
-from ..phrt_addon import runlog
+from ..engine import replay
+from ..engine.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
 
 MODE_ITEMS = (
     ("RASTER", "Raster", "Raster only: no ray tracing at all", 1),
@@ -42,153 +40,6 @@ BLEND_RELATIVE_PATH = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
                       "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
-
-
-class ReplayInterrupted(replay.ReplayError):
-    """The frame's render was stopped (Esc during a render): nothing of it was kept."""
-
-
-class SteppedReplay:
-    """``engine.replay.replay()`` one frame per ``step()``.
-
-    ``run = SteppedReplay(...)``; ``while run.remaining: run.step()``;
-    ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
-    An exception in ``step()`` restores the scene and leaves the complete rows
-    written so far (like ``replay()``); ``ReplayInterrupted`` (the render itself was
-    stopped) leaves the run open for ``finish(cancelled=True)``."""
-
-    def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
-                 resolution=None, scene_label=None):
-        mode = mode.upper()
-        if mode not in replay.MODES:
-            raise replay.ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in replay.MODES)}")
-        if images not in replay.IMAGE_FORMATS:
-            raise replay.ReplayError(f"unknown image format '{images}': use exr, png or none")
-        if budget_ms is not None and not budget_ms >= 0:
-            raise replay.ReplayError(f"budget must be a number of milliseconds >= 0, not {budget_ms}")
-        start, end = frame_range
-        if end < start:
-            raise replay.ReplayError(f"frame range {start}-{end} ends before it starts")
-        self.run_dir = Path(run_dir)
-        self.frames_dir = self.run_dir / runlog.FRAMES_DIR
-        try:
-            self.frames_dir.mkdir(parents=True, exist_ok=True)
-            probe = self.run_dir / ".phrt-write-test"
-            probe.write_text("")
-            probe.unlink()
-        except OSError as error:
-            raise replay.ReplayError(f"cannot write to output folder '{self.run_dir}': "
-                                     f"{error.strerror or error}") from None
-        self.scene, self.mode, self.images = scene, mode, images
-        self.frames = list(range(start, end + 1))
-        self.done = 0
-        self.settings = extract.read_settings(scene)
-        self.settings.mode = mode
-        if budget_ms is not None:
-            self.settings.budget_ms = float(budget_ms)
-        render = scene.render
-        self._saved = {"camera": scene.camera, "frame": scene.frame_current, "filepath": render.filepath,
-                       "res": (render.resolution_x, render.resolution_y, render.resolution_percentage),
-                       "engine": render.engine, "use_ext": render.use_file_extension}
-        self._image_saved = {key: getattr(render.image_settings, key) for key in
-                             ("file_format", "color_depth", "color_mode") if hasattr(render.image_settings, key)}
-        if hasattr(render.image_settings, "media_type"):
-            self._image_saved = {"media_type": render.image_settings.media_type, **self._image_saved}
-        scene.camera = camera
-        render.engine = "PHRT"
-        if resolution is not None:
-            render.resolution_x, render.resolution_y = resolution
-            render.resolution_percentage = 100
-        replay._set_image_format(scene, images)
-        render.use_file_extension = True
-        width, height = extract.resolution(scene)
-        # Everything summary.json needs, read now: finish() may run when the scene is gone.
-        self._summary = {
-            "scene": scene_label or scene.name, "path": camera.name, "resolution": [width, height],
-            "images": images, "frame_range": [start, end], "cost_mode": self.settings.cost_mode,
-            "selection_weight": self.settings.selection_weight,
-            "max_area_fraction": self.settings.max_area_fraction, **replay.versions()}
-        self.log = runlog.RunLog(self.run_dir, extra_frame_columns=replay.EXTRA_FRAME_COLUMNS)
-        self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
-        self._open = True
-
-    @property
-    def total(self) -> int:
-        return len(self.frames)
-
-    @property
-    def remaining(self) -> int:
-        return self.total - self.done
-
-    def step(self) -> dict:
-        """Render, write and log the next frame; returns its stats."""
-        if not self._open or not self.remaining:
-            raise ValueError("SteppedReplay: no frame left to render")
-        frame = self.frames[self.done]
-        scene, render, session = self.scene, self.scene.render, self.session
-        try:
-            scene.frame_set(frame)
-            render.filepath = str(self.frames_dir / f"{frame:04d}")
-            begin = time.perf_counter()
-            bpy.ops.render.render(write_still=self.images != "none")
-            wall_ms = (time.perf_counter() - begin) * 1000.0
-            result = session.last_result
-            if result is None:  # a failed render raises RuntimeError: this one was stopped
-                for image in self.frames_dir.glob(f"{frame:04d}.*"):
-                    image.unlink()
-                raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
-            row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
-            row.update({key: result.stats.get(key) for key in replay.EXTRA_FRAME_COLUMNS})
-            row["wall_ms"] = wall_ms
-            self.log.add_frame(row, result.selection_rows)
-            session.last_result = None
-        except ReplayInterrupted:
-            raise
-        except BaseException:
-            self._close(summary=None)
-            raise
-        self.done += 1
-        return result.stats
-
-    def finish(self, cancelled=False, restore_scene=True) -> replay.ReplayResult:
-        """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
-        the scene (``restore_scene=False`` when Blender is discarding it)."""
-        if not self._open:
-            raise ValueError("SteppedReplay: already finished")
-        cancelled = bool(cancelled and self.remaining)
-        written = self._close(summary={**self._summary, "cancelled": cancelled}, restore_scene=restore_scene)
-        return replay.ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
-                                   cancelled=cancelled, summary=written)
-
-    def _close(self, summary, restore_scene=True):
-        if not self._open:
-            return None
-        self._open = False
-        written = None
-        try:
-            if summary is not None:
-                written = self.log.close(summary)
-            else:
-                self.log.__exit__(None, None, None)  # keep the complete rows, no summary
-        finally:
-            self.session.__exit__(None, None, None)
-            if restore_scene:
-                self._restore()
-        return written
-
-    def _restore(self):
-        scene, render, saved = self.scene, self.scene.render, self._saved
-        scene.camera = saved["camera"]
-        scene.frame_set(saved["frame"])
-        render.filepath = saved["filepath"]
-        render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
-        render.engine = saved["engine"]
-        render.use_file_extension = saved["use_ext"]
-        for key, value in self._image_saved.items():
-            try:
-                setattr(render.image_settings, key, value)
-            except (TypeError, AttributeError):
-                pass
 
 
 def scene_label(scene) -> str:

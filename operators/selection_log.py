@@ -6,7 +6,6 @@ ones, numbers written like the run logs (6 significant digits, booleans 1/0).
 JSON is a list of one object per row with the same keys (booleans as true/false,
 non-finite numbers as null).  The format follows the file's extension.
 """
-from __future__ import annotations
 
 import csv
 import json

@@ -1,5 +1,4 @@
 """Tagging several objects at once, and refreshing the N panel's candidate list."""
-from __future__ import annotations
 
 import bpy
 from bpy.props import EnumProperty

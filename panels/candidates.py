@@ -9,7 +9,6 @@ after every render (a ``render_post`` handler; renders started with F12 finish o
 the render thread, so those refreshes are handed to the main thread through a
 queue that a timer drains).  Clicking an element selects its object.
 """
-from __future__ import annotations
 
 import queue
 import threading

@@ -10,7 +10,6 @@
 
 Every panel shares ``PHRT_Panel``: shown only when the render engine is PHRT.
 """
-from __future__ import annotations
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty

@@ -44,10 +44,17 @@ def worker_count() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
 
-def ray_epsilon(points: np.ndarray, scene_extent: float) -> np.ndarray:
+def ray_epsilon(points: np.ndarray, scene_extent: float, view_distance=None) -> np.ndarray:
     """Offset for secondary-ray origins: many float32 ulps of the point's magnitude,
-    with a floor relative to the scene size (works from 1e-3 to 1e5 units)."""
+    with a floor relative to the scene size (works from 1e-3 to 1e5 units).
+
+    ``view_distance`` (optional, per point): how far the ray that found the point travelled,
+    from the camera for a G-buffer position or from the ray origin for a hit.  Such a point
+    carries float32 error of that size, which in a telephoto view of a small scene is far above
+    the point's own magnitude (shadow acne without it)."""
     magnitude = np.max(np.abs(points), axis=-1)
+    if view_distance is not None:
+        magnitude = np.maximum(magnitude, np.nan_to_num(np.asarray(view_distance, np.float64), posinf=0.0))
     return EPSILON_ULPS * FLOAT32_EPS * (magnitude + 1e-3 * scene_extent) + 1e-7 * scene_extent
 
 
@@ -324,13 +331,13 @@ class RadianceTracer:
                 albedo[chosen] *= sample_texture(texture, uv[chosen])[:, :3]
         return albedo
 
-    def direct(self, points_trace, surface: shading.SurfaceSamples):
-        """Direct light with traced shadows at trace-frame points."""
+    def direct(self, points_trace, surface: shading.SurfaceSamples, view_distance=None):
+        """Direct light with traced shadows at trace-frame points (``view_distance``: see ray_epsilon)."""
         total = np.zeros((len(points_trace), 3))
         if len(points_trace) == 0:
             return total
         origin_world = self.scene.origin
-        eps = ray_epsilon(points_trace, self.scene.extent)
+        eps = ray_epsilon(points_trace, self.scene.extent, view_distance)
         for light in self.snapshot.lights:
             direction, distance, irradiance = shading.light_incidence(light, points_trace, origin_world)
             contribution = shading.brdf_cosine(surface, direction) * irradiance
@@ -367,11 +374,12 @@ class RadianceTracer:
             position=points, normal=facing, view=-dirs, albedo=self._albedo(material, uv, has_uv),
             metallic=m.metallic[material], roughness=m.roughness[material],
             transmission=m.transmission[material], ior=m.ior[material], emission=m.emission[material])
-        color = surface.emission + self.direct(points, surface)
+        travelled = hits["t"][idx]
+        color = surface.emission + self.direct(points, surface, travelled)
         diffuse_ambient, env_fresnel = shading.ambient(surface, self.world)
         color += diffuse_ambient
         transmissive = surface.transmission * (1.0 - surface.metallic)
-        eps = ray_epsilon(points, self.scene.extent)
+        eps = ray_epsilon(points, self.scene.extent, travelled)
         # Dielectric Fresnel for the transmissive part (exact, with total internal reflection).
         eta = np.where(entering, 1.0 / surface.ior, surface.ior)
         cos_i = np.clip(np.sum(-dirs * facing, axis=1), 0.0, 1.0)

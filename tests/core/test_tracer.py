@@ -386,6 +386,23 @@ def test_grazing_sun_on_an_empty_floor_lights_every_point(scale, offset, closing
     assert np.all(color[:, 0] > 0), f"{np.sum(color[:, 0] <= 0)} floor points self-shadowed at grazing light"
 
 
+@pytest.mark.parametrize("distance", [1e2, 1e3, 1e4])
+def test_floor_seen_from_far_away_has_no_acne(distance, closing):
+    """A 2-unit floor seen from ``distance`` units (a telephoto view): the hit points carry the
+    float32 error of the ray length, far above the scene's own precision."""
+    sun = Light("sun", "SUN", (1.0, 1.0, 1.0), direction=tuple(shading.normalize(np.array([0.3, 0.2, -1.0]))))
+    snap = snapshot([quad("floor", (0, 0, 0), 2.0, 2.0, "+z")], [diffuse("grey")], [sun])
+    scene, radiance_tracer = build(snap, threads=2)
+    closing(scene)
+    rng = np.random.default_rng(6)
+    targets = np.c_[rng.uniform(-0.9, 0.9, (20000, 2)), np.zeros(20000)]
+    eye = distance * shading.normalize(np.array([1.0, -2.0, 1.5]))
+    directions = shading.normalize(targets - eye)
+    color = radiance_tracer.radiance(scene.to_trace(np.tile(eye, (len(targets), 1))), directions, 0)
+    dark = np.sum(color[:, 0] <= 0)
+    assert dark == 0, f"{dark} of {len(targets)} floor points self-shadowed seen from {distance:g} units"
+
+
 def test_grazing_mirror_reflection_does_not_hit_its_own_surface(closing):
     materials = [MIRROR, emissive("sky", (0.0, 0.0, 1.0))]
     meshes = [quad("mirror", (0, 0, 0), 2000, 2000, "+z", material=0),

@@ -522,3 +522,30 @@ def test_a_new_file_far_away_renders_like_the_first(tmp_path):
     lit_first = lit_fraction(first["Combined"], floor) > 0.5
     lit_second = lit_fraction(second["Combined"], floor) > 0.5
     assert np.mean(lit_first[floor] == lit_second[floor]) > 0.995
+
+
+@pytest.mark.xfail(strict=True, reason="frame.py offsets traced rays by ray_epsilon(points, extent) without the "
+                                       "G-buffer's camera distance (view_distance): acne in telephoto views")
+@pytest.mark.parametrize("factor", [10, 100])
+def test_telephoto_view_of_a_small_scene_has_no_shadow_acne(factor, tmp_path):
+    """The Cycles comparison scene seen from ``factor`` times farther with a ``factor`` times longer
+    lens (about the same framing): G-buffer positions carry float32 error of the camera distance.
+    Traced shadows must not darken pixels the shadow map lights, away from the raster's edges."""
+    scene = cycles_scene()
+    camera = scene.camera
+    target = np.array([-0.3, 0.6, 0.3])
+    camera.location = tuple(target + (np.array(camera.location) - target) * factor)
+    camera.data.lens *= factor
+    camera.data.clip_start *= factor
+    camera.data.clip_end *= factor
+    traced = render(scene, "RAYTRACE", f"telephoto-{factor}", tmp_path)["Combined"][..., :3].mean(axis=-1)
+    raster = render(scene, "RASTER", f"telephoto-{factor}", tmp_path)["Combined"][..., :3].mean(axis=-1)
+    padded = np.pad(raster, 2, mode="edge")
+    smooth = np.ones_like(raster, bool)  # no raster edge (shadow or silhouette) within 2 pixels
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            neighbour = padded[2 + dy:2 + dy + raster.shape[0], 2 + dx:2 + dx + raster.shape[1]]
+            smooth &= np.abs(neighbour - raster) <= 0.2 * raster + 1e-3
+    assert smooth.sum() > 0.5 * smooth.size
+    acne = smooth & (traced < 0.6 * raster)
+    assert acne.sum() == 0, f"{acne.sum()} acne pixels at {factor}x camera distance"
