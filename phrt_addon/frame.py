@@ -246,7 +246,7 @@ class FrameRenderer:
                 continue
             surface = samples["surface"]
             points_trace = scene.to_trace(samples["world"])
-            eps = ray_epsilon(points_trace, scene.extent)
+            eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples))
             for light_index, light in enumerate(snapshot.lights):
                 terms = visibility[layer_name][light_index]
                 if not light.cast_shadows or len(terms.active) == 0:
@@ -283,7 +283,7 @@ class FrameRenderer:
             if len(idx) == 0:
                 continue
             points_trace = scene.to_trace(samples["world"][idx])
-            eps = ray_epsilon(points_trace, scene.extent)
+            eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
             direction = shading.reflect(samples["directions"][idx], surface.normal[idx])
             radiance = tracer.radiance(points_trace + surface.normal[idx] * eps[:, None], direction, 1)
             reflection_radiance[layer_name] = (idx, radiance)
@@ -306,7 +306,7 @@ class FrameRenderer:
             idx = np.flatnonzero(wanted)
             if len(idx):
                 points_trace = scene.to_trace(samples["world"][idx])
-                eps = ray_epsilon(points_trace, scene.extent)
+                eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
                 direction, _ = shading.refract(samples["directions"][idx], surface.normal[idx], 1.0 / surface.ior[idx])
                 radiance = tracer.radiance(points_trace - surface.normal[idx] * eps[:, None], direction, 1)
                 refraction_radiance["transparent"] = (idx, radiance)
@@ -390,6 +390,13 @@ class _Counters:
     @property
     def rays(self):
         return self.shadow_rays + self.reflection_rays + self.refraction_rays
+
+
+def _camera_distance(samples, index=slice(None)):
+    """Distance from the camera of G-buffer points (their positions are camera-relative): the
+    size of their float32 error, which secondary-ray offsets must exceed (telephoto views)."""
+    position = samples["surface"].position[index]
+    return np.sqrt(shading.dot(position, position))
 
 
 # Pixels receiving less than this fraction of a light's strongest irradiance in the frame skip it.

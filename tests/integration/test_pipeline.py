@@ -524,8 +524,6 @@ def test_a_new_file_far_away_renders_like_the_first(tmp_path):
     assert np.mean(lit_first[floor] == lit_second[floor]) > 0.995
 
 
-@pytest.mark.xfail(strict=True, reason="frame.py offsets traced rays by ray_epsilon(points, extent) without the "
-                                       "G-buffer's camera distance (view_distance): acne in telephoto views")
 @pytest.mark.parametrize("factor", [10, 100])
 def test_telephoto_view_of_a_small_scene_has_no_shadow_acne(factor, tmp_path):
     """The Cycles comparison scene seen from ``factor`` times farther with a ``factor`` times longer
