@@ -79,6 +79,36 @@ def _shadow_key(light, snapshot, size):
     return digest.hexdigest()
 
 
+def rasterize(snapshot):
+    """The GPU stage of a frame (needs a GPU context): G-buffer and shadow maps, the maps
+    cached until their light or the geometry changes.  Returns (gbuffer, shadow maps by light
+    index, raster ms, one-time part of it (shader set-up, new shadow maps), GPU upload ms)."""
+    start = time.perf_counter()
+    shadow_maps = {}
+    shadow_render_ms = 0.0
+    with raster.RasterPass(snapshot) as raster_pass:
+        gbuffer = raster_pass.render_gbuffer()
+        if snapshot.meshes:
+            bounds = snapshot.bounds()
+            keys = set()
+            for index, light in enumerate(snapshot.lights):
+                if not light.cast_shadows:
+                    continue
+                key = _shadow_key(light, snapshot, snapshot.settings.shadow_map_size)
+                keys.add(key)
+                maps = raster.SHADOW_MAP_CACHE.get(key)
+                if maps is None:
+                    begin = time.perf_counter()
+                    maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
+                    shadow_render_ms += (time.perf_counter() - begin) * 1000.0
+                    raster.SHADOW_MAP_CACHE.put(key, maps)
+                shadow_maps[index] = maps
+            raster.SHADOW_MAP_CACHE.retain(keys)  # a light dragged around must not pile up maps
+        upload_ms = raster_pass.stats["upload_ms"]
+    raster_ms = (time.perf_counter() - start) * 1000.0
+    return gbuffer, shadow_maps, raster_ms, min(shadow_render_ms + upload_ms, raster_ms), upload_ms
+
+
 class FinalRender:
     def __init__(self, engine):
         self.engine = engine
@@ -102,35 +132,12 @@ class FinalRender:
                 renderer = _STANDALONE[scene.name] = FrameRenderer()
 
         engine.update_stats("PHRT", "Raster")
-        start = time.perf_counter()
-        shadow_maps = {}
-        shadow_render_ms = 0.0
-        with raster.RasterPass(snapshot) as raster_pass:
-            gbuffer = raster_pass.render_gbuffer()
-            if snapshot.meshes:
-                bounds = snapshot.bounds()
-                keys = set()
-                for index, light in enumerate(snapshot.lights):
-                    if not light.cast_shadows:
-                        continue
-                    key = _shadow_key(light, snapshot, snapshot.settings.shadow_map_size)
-                    keys.add(key)
-                    maps = raster.SHADOW_MAP_CACHE.get(key)
-                    if maps is None:
-                        begin = time.perf_counter()
-                        maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
-                        shadow_render_ms += (time.perf_counter() - begin) * 1000.0
-                        raster.SHADOW_MAP_CACHE.put(key, maps)
-                    shadow_maps[index] = maps
-                raster.SHADOW_MAP_CACHE.retain(keys)
-            upload_ms = raster_pass.stats["upload_ms"]
-        raster_ms = (time.perf_counter() - start) * 1000.0
+        gbuffer, shadow_maps, raster_ms, raster_setup_ms, upload_ms = rasterize(snapshot)
         # No early return on test_break(): Blender 5.0.1 crashes saving a multilayer EXR of a
         # render that wrote no result, and a frame takes well under a second to finish.
 
         engine.update_stats("PHRT", "Selection, tracing, compositing")
-        result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms,
-                                 raster_setup_ms=min(shadow_render_ms + upload_ms, raster_ms))
+        result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms, raster_setup_ms=raster_setup_ms)
         result.stats["extract_ms"] = extract_ms
         result.stats["gpu_upload_ms"] = upload_ms
         self._write(result, width, height)

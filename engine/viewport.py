@@ -26,7 +26,7 @@ import numpy as np
 
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.scene import Camera
-from . import extract, final, raster
+from . import extract, final
 
 # What each decision looks like in the overlay (linear RGBA).  Elements that are
 # not candidates get no box: the overlay shows what the designer tagged.
@@ -222,26 +222,8 @@ def render_view(depsgraph, camera: Camera, renderer: FrameRenderer):
     snapshot = extract.extract(depsgraph, camera_override=stand_in)
     snapshot = dataclasses.replace(snapshot, camera=camera)
     extract_ms = (time.perf_counter() - start) * 1000.0
-    start = time.perf_counter()
-    shadow_maps = {}
-    with raster.RasterPass(snapshot) as raster_pass:
-        gbuffer = raster_pass.render_gbuffer()
-        if snapshot.meshes:
-            bounds = snapshot.bounds()
-            keys = set()
-            for index, light in enumerate(snapshot.lights):
-                if not light.cast_shadows:
-                    continue
-                key = final._shadow_key(light, snapshot, snapshot.settings.shadow_map_size)
-                keys.add(key)
-                maps = raster.SHADOW_MAP_CACHE.get(key)
-                if maps is None:
-                    maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
-                    raster.SHADOW_MAP_CACHE.put(key, maps)
-                shadow_maps[index] = maps
-            raster.SHADOW_MAP_CACHE.retain(keys)  # a light dragged around must not pile up maps
-    raster_ms = (time.perf_counter() - start) * 1000.0
-    result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms)
+    gbuffer, shadow_maps, raster_ms, raster_setup_ms, _ = final.rasterize(snapshot)
+    result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms, raster_setup_ms=raster_setup_ms)
     result.stats["extract_ms"] = extract_ms
     result.problems = list(snapshot.problems)
     return result

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import shading
 from .scene import Camera, Material, MeshInstance, SceneSnapshot
-from .tracer import TraceScene, ray_epsilon, worker_count
+from .tracer import TraceScene, ray_epsilon
 
 WIDTH, HEIGHT = 640, 480
 REPEATS = 5

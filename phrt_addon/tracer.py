@@ -291,22 +291,6 @@ class TraceScene:
         return indices, material, element, normal, geometric, uv, has_uv
 
 
-@dataclass
-class TraceCounters:
-    """Rays and milliseconds per effect, and rays per element, for the cost model."""
-
-    shadow_rays: int = 0
-    reflection_rays: int = 0
-    refraction_rays: int = 0
-    shadow_ms: float = 0.0
-    reflection_ms: float = 0.0
-    refraction_ms: float = 0.0
-
-    @property
-    def rays(self) -> int:
-        return self.shadow_rays + self.reflection_rays + self.refraction_rays
-
-
 class RadianceTracer:
     """Shades ray hits with the shared BRDF, shadow rays and recursion to ``max_bounces``."""
 
