@@ -240,7 +240,8 @@ class ViewportRender:
         self.renderer = FrameRenderer()
         self.stale = True
         self.view_key = None
-        self.texture = None
+        self.pixels = None  # the last frame (numpy): GPU objects never outlive a draw call
+        self.size = None
 
     def update(self, depsgraph):
         self.stale = True
@@ -258,7 +259,7 @@ class ViewportRender:
         key = (view_matrix.round(6).tobytes(), window_matrix.round(6).tobytes(), width, height)
         if self.stale or key != self.view_key:
             # Whatever happens, this view is done: a failing scene is not re-rendered on every redraw.
-            self.stale, self.view_key, self.texture = False, key, None
+            self.stale, self.view_key, self.pixels = False, key, None
             camera = view_camera(view_matrix, window_matrix, width, height, ortho=not region_3d.is_perspective,
                                  clip_start=getattr(space, "clip_start", 0.01),
                                  clip_end=getattr(space, "clip_end", 1000.0))
@@ -267,17 +268,21 @@ class ViewportRender:
                 result = render_view(depsgraph, camera, self.renderer)
             finally:
                 gpu.state.viewport_set(*viewport)
-            pixels = np.ascontiguousarray(np.nan_to_num(result.passes.combined), dtype=np.float32).ravel()
-            buffer = gpu.types.Buffer("FLOAT", pixels.size, pixels)
-            self.texture = gpu.types.GPUTexture((width, height), format="RGBA16F", data=buffer)
+            self.pixels = np.ascontiguousarray(np.nan_to_num(result.passes.combined), dtype=np.float32).ravel()
+            self.size = (width, height)
             engine.update_stats("PHRT", f"{result.stats['total_ms']:.0f} ms, "
                                         f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
-        if self.texture is None:
+        if self.pixels is None:
             return
+        # Uploaded for this draw only (a few ms): a texture kept on the engine would be freed
+        # by the garbage collector outside any GPU context.
+        buffer = gpu.types.Buffer("FLOAT", self.pixels.size, self.pixels)
+        texture = gpu.types.GPUTexture(self.size, format="RGBA16F", data=buffer)
         gpu.state.blend_set("ALPHA_PREMULT")
         engine.bind_display_space_shader(depsgraph.scene)
         try:
-            draw_texture_2d(self.texture, (0, 0), region.width, region.height)
+            draw_texture_2d(texture, (0, 0), region.width, region.height)
         finally:
             engine.unbind_display_space_shader()
             gpu.state.blend_set("NONE")
+            del texture, buffer

@@ -176,33 +176,36 @@ class FrameRenderer:
     # ------------------------------------------------------------------
     @staticmethod
     def _layer_samples(gbuffer, snapshot, materials):
-        """Per covered pixel of each layer: flat index, world point, surface samples."""
+        """Per covered pixel of each layer: flat index, world point (float64, for rays),
+        and float32 surface samples relative to the camera (for deferred lighting)."""
         camera = snapshot.camera
         layers = {}
         for name, layer in (("opaque", gbuffer.opaque), ("transparent", gbuffer.transparent)):
             flat = np.flatnonzero(layer.covered.ravel())
-            position = layer.position.reshape(-1, 3)[flat].astype(np.float64)
-            world = position + gbuffer.origin
+            position = layer.position.reshape(-1, 3)[flat]  # float32, camera-relative
+            world = position.astype(np.float64) + gbuffer.origin
             # Positions are relative to the camera: the view ray is the position itself
             # (perspective) or the camera axis (orthographic).
             if camera.ortho:
-                view_dirs = np.broadcast_to(camera.forward, position.shape).copy()
+                view_dirs = np.broadcast_to(camera.forward.astype(np.float32), position.shape).copy()
             else:
                 view_dirs = shading.normalize(position)
             material = np.clip(layer.material.ravel()[flat], 0, len(materials.ior) - 1)
-            normal = shading.normalize(layer.normal.reshape(-1, 3)[flat].astype(np.float64))
+            normal = shading.normalize(layer.normal.reshape(-1, 3)[flat])
             # A normal facing away from the viewer (interpolation at silhouettes) is flipped.
             back = shading.dot(normal, view_dirs) > 0
             normal[back] *= -1.0
             surface = shading.SurfaceSamples(
                 position=position, normal=normal, view=-view_dirs,
-                albedo=layer.albedo.reshape(-1, 3)[flat].astype(np.float64),
-                metallic=layer.metallic.ravel()[flat].astype(np.float64),
-                roughness=layer.roughness.ravel()[flat].astype(np.float64),
-                transmission=materials.transmission[material], ior=materials.ior[material],
-                emission=materials.emission[material])
+                albedo=layer.albedo.reshape(-1, 3)[flat],
+                metallic=layer.metallic.ravel()[flat],
+                roughness=layer.roughness.ravel()[flat],
+                transmission=materials.transmission[material].astype(np.float32),
+                ior=materials.ior[material].astype(np.float32),
+                emission=materials.emission[material].astype(np.float32))
             layers[name] = {"flat": flat, "world": world, "surface": surface, "material": material,
-                            "element": layer.element.ravel()[flat], "directions": view_dirs}
+                            "element": layer.element.ravel()[flat], "directions": view_dirs,
+                            "origin": gbuffer.origin}
         return layers
 
     def _shadow_footprints(self, layers, snapshot, element_bounds, area_px, mode):
@@ -419,16 +422,17 @@ def light_terms(light, samples, shadow_maps) -> LightTerms:
     if len(surface) == 0:
         empty = np.zeros((0, 3))
         return LightTerms(np.zeros(0, np.int64), empty, empty, np.zeros(0))
-    direction, _, irradiance = shading.light_incidence(light, samples["world"], np.zeros(3))
+    direction, _, irradiance = shading.light_incidence(light, surface.position, samples["origin"])
     strength = irradiance.max(axis=1)
     reached = (shading.dot(surface.normal, direction) > 0) & (strength > LIGHT_CUTOFF * max(strength.max(), 1e-30))
     active = np.flatnonzero(reached)
     direction = np.ascontiguousarray(direction[active])
     irradiance = np.ascontiguousarray(irradiance[active])
     if light.cast_shadows and shadow_maps and len(active):
-        visibility = shadow_visibility(shadow_maps, samples["world"][active], surface.normal[active])
+        visibility = shadow_visibility(shadow_maps, surface.position[active], surface.normal[active],
+                                       origin=samples["origin"])
     else:
-        visibility = np.ones(len(active))
+        visibility = np.ones(len(active), np.float32)
     return LightTerms(active, direction, irradiance, visibility)
 
 

@@ -171,22 +171,25 @@ def brdf_cosine(surface: SurfaceSamples, light_dir):
 
 def light_incidence(light, position, origin):
     """For points (N,3, relative to ``origin``): unit direction to the light, distance to it
-    (inf for the sun) and the irradiance arriving there (N,3), before shadows and cosine."""
-    color = np.asarray(light.color, dtype=np.float64)
+    (inf for the sun) and the irradiance arriving there (N,3), before shadows and cosine.
+    Works in the precision of ``position`` (float32 for camera-relative G-buffer points)."""
+    position = np.asarray(position)
+    dtype = position.dtype if position.dtype in (np.float32, np.float64) else np.float64
+    color = np.asarray(light.color, dtype=np.float64).astype(dtype)
     n = len(position)
     if light.kind == "SUN":
-        direction = -normalize(np.asarray(light.direction, dtype=np.float64))
-        return np.broadcast_to(direction, (n, 3)), np.full(n, np.inf), np.broadcast_to(color, (n, 3))
-    light_position = np.asarray(light.position, dtype=np.float64) - origin
+        direction = -normalize(np.asarray(light.direction, dtype=np.float64)).astype(dtype)
+        return np.broadcast_to(direction, (n, 3)), np.full(n, np.inf, dtype), np.broadcast_to(color, (n, 3))
+    light_position = (np.asarray(light.position, dtype=np.float64) - origin).astype(dtype)
     to_light = light_position - position
     distance = np.sqrt(dot(to_light, to_light))
     safe = np.maximum(distance, 1e-6)
     direction = to_light / safe[:, None]
-    axis = normalize(np.asarray(light.direction, dtype=np.float64))
+    axis = normalize(np.asarray(light.direction, dtype=np.float64)).astype(dtype)
     if light.kind == "AREA":
         intensity = np.clip(-(direction @ axis), 0.0, 1.0) * INV_PI
     else:
-        intensity = np.full(n, 0.25 * INV_PI)
+        intensity = np.full(n, 0.25 * INV_PI, dtype)
         if light.kind == "SPOT":
             cos_angle = -(direction @ axis)
             outer = np.cos(light.spot_size / 2.0)

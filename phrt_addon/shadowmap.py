@@ -132,21 +132,24 @@ def _linear_depth(view: LightView, window_depth):
     return 2.0 * n * f / np.maximum(f + n - z_ndc * (f - n), 1e-300)
 
 
-def _lookup_one(shadow_map: ShadowMap, points, normals):
-    """Lit fraction in [0,1] for points seen by one view; NaN where outside this view."""
+def _lookup_one(shadow_map: ShadowMap, relative, normals):
+    """Lit fraction in [0,1] for points (relative to the view's origin) seen by one view;
+    NaN where outside this view.  Works in the points' precision (float32 or float64)."""
     view = shadow_map.view
-    relative = points - view.origin
-    view_space = relative @ view.view[:3, :3].T
-    axis_depth = -view_space[:, 2]
-    texel = np.full(len(points), view.texel_angle) if view.ortho else view.texel_angle * np.maximum(axis_depth, view.near)
+    dtype = relative.dtype
+    rotation = view.view[:3, :3].astype(dtype)
+    view_proj = view.view_proj_relative.astype(dtype)
+    axis_depth = -(relative @ rotation[2])
+    texel = np.full(len(relative), view.texel_angle, dtype) if view.ortho else \
+        (view.texel_angle * np.maximum(axis_depth, view.near)).astype(dtype)
     offset_points = relative + normals * (NORMAL_OFFSET_TEXELS * texel)[:, None]
-    clip = offset_points @ view.view_proj_relative[:3, :3].T + view.view_proj_relative[:3, 3]
-    w = offset_points @ view.view_proj_relative[3, :3] + view.view_proj_relative[3, 3]
+    clip = offset_points @ view_proj[:3, :3].T + view_proj[:3, 3]
+    w = offset_points @ view_proj[3, :3] + view_proj[3, 3]
     valid = w > 1e-12
     safe_w = np.where(valid, w, 1.0)
     ndc = clip / safe_w[:, None]
     inside = valid & np.all(np.abs(ndc[:, :2]) <= 1.0, axis=1) & (ndc[:, 2] <= 1.0)
-    receiver_depth = -(offset_points @ view.view[:3, :3].T)[:, 2]
+    receiver_depth = -(offset_points @ rotation[2])
     size = view.size
     u = (ndc[:, 0] * 0.5 + 0.5) * size - 0.5
     v = (ndc[:, 1] * 0.5 + 0.5) * size - 0.5
@@ -154,7 +157,7 @@ def _lookup_one(shadow_map: ShadowMap, points, normals):
     fu, fv = u - u0, v - v0
     u0 = u0.astype(np.int64)
     v0 = v0.astype(np.int64)
-    lit = np.zeros(len(points), np.float32)
+    lit = np.zeros(len(relative), np.float32)
     threshold = (receiver_depth - DEPTH_BIAS_TEXELS * texel).astype(np.float32)
     x0 = np.clip(u0, 0, size - 1)
     x1 = np.clip(u0 + 1, 0, size - 1)
@@ -169,16 +172,22 @@ def _lookup_one(shadow_map: ShadowMap, points, normals):
     return np.where(inside, lit, np.nan)
 
 
-def shadow_visibility(shadow_maps, points, normals) -> np.ndarray:
-    """Lit fraction in [0,1] of each world point (float64 (N,3)) for one light's maps.
-    Points outside every map are lit (nothing was drawn there to occlude them)."""
-    points = np.asarray(points, dtype=np.float64)
-    normals = np.asarray(normals, dtype=np.float64)
+def shadow_visibility(shadow_maps, points, normals, origin=None) -> np.ndarray:
+    """Lit fraction in [0,1] of each point for one light's maps.  ``points`` (N,3) are world
+    positions, or positions relative to ``origin`` (e.g. camera-relative float32 G-buffer
+    positions: the lookup then runs in float32).  Points outside every map are lit (nothing
+    was drawn there to occlude them)."""
+    if origin is None:
+        points = np.asarray(points, dtype=np.float64)
+        origin = np.zeros(3)
+    points = np.asarray(points)
+    normals = np.asarray(normals, dtype=points.dtype)
     if len(points) == 0 or not shadow_maps:
         return np.ones(len(points))
+    # Every view of one light shares its origin.
+    relative = points + (np.asarray(origin, np.float64) - shadow_maps[0].view.origin).astype(points.dtype)
     if len(shadow_maps) == 6:
         # Cube: each point is looked up in the face of its major axis only.
-        relative = points - shadow_maps[0].view.origin
         axis = np.argmax(np.abs(relative), axis=1)
         sign = np.take_along_axis(relative, axis[:, None], axis=1)[:, 0] < 0
         face = axis * 2 + sign
@@ -186,8 +195,8 @@ def shadow_visibility(shadow_maps, points, normals) -> np.ndarray:
         for index, shadow_map in enumerate(shadow_maps):
             chosen = face == index
             if np.any(chosen):
-                lit = _lookup_one(shadow_map, points[chosen], normals[chosen])
+                lit = _lookup_one(shadow_map, relative[chosen], normals[chosen])
                 result[chosen] = np.where(np.isnan(lit), 1.0, lit)
         return result
-    lit = _lookup_one(shadow_maps[0], points, normals)
+    lit = _lookup_one(shadow_maps[0], relative, normals)
     return np.where(np.isnan(lit), 1.0, lit)

@@ -29,6 +29,7 @@ def test_register_unregister_register_leaves_nothing_behind(blender):
     assert hasattr(bpy.types.Object, "phrt") and hasattr(bpy.types.Scene, "phrt")
     assert "PHRT" in bpy.types.RENDER_PT_format.COMPAT_ENGINES
     assert "PHRT" in _engine_ids(bpy)
+    bpy.ops.wm.read_homefile(use_empty=True)  # defaults are checked on a new file
     scene = bpy.context.scene
     assert scene.phrt.max_area_fraction == pytest.approx(0.40)
     assert scene.phrt.mode == "HYBRID"

@@ -703,7 +703,7 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
                         if update:
                             view_render.update(depsgraph)
                         view_render.draw(engine, context, depsgraph)
-                        textures.append(view_render.texture)
+                        textures.append(view_render.pixels)
                 buffer = gpu.types.Buffer("FLOAT", WIDTH * HEIGHT * 4)
                 framebuffer.read_color(0, 0, WIDTH, HEIGHT, 4, 0, "FLOAT", data=buffer)
                 drawn = np.asarray(buffer).reshape(HEIGHT, WIDTH, 4).copy()
@@ -712,7 +712,7 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
         return drawn, textures
 
     drawn, textures = run_on_gpu(scene, job)
-    assert textures[0] is textures[1]  # nothing changed: the cached image is drawn again
+    assert textures[0] is textures[1]  # nothing changed: the cached image is drawn again (no GPU object kept)
     assert textures[2] is not textures[1]  # view_update: rendered again
     image = drawn[::-1, :, :3]
     assert np.abs(image - rgb(final_render)).mean() < 0.01  # half-float texture of the same frame
