@@ -51,11 +51,16 @@ class SurfaceSamples:
     def __len__(self):
         return len(self.position)
 
+    BRDF_FIELDS = ("normal", "view", "alpha", "n_dot_v", "f0", "diffuse_color")
+
     def subset(self, index) -> "SurfaceSamples":
-        """The samples at ``index`` (precomputed terms are sliced, not recomputed)."""
+        """The samples at ``index`` with just what ``brdf_cosine`` reads (precomputed terms are
+        sliced, not recomputed; nothing is copied when ``index`` takes every sample)."""
+        if len(index) == len(self):
+            return self
         part = object.__new__(SurfaceSamples)
-        for name, value in self.__dict__.items():
-            part.__dict__[name] = value[index]
+        for name in self.BRDF_FIELDS:
+            part.__dict__[name] = self.__dict__[name][index]
         return part
 
 
