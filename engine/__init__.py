@@ -27,6 +27,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.final = None
+        self.viewport = None  # engine/viewport.ViewportRender, created by the first viewport callback
 
     def render(self, depsgraph):
         try:
@@ -43,7 +44,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         """Rendered shading: something changed; the next view_draw renders again."""
         from . import viewport
         try:
-            if getattr(self, "viewport", None) is None:
+            if self.viewport is None:
                 self.viewport = viewport.ViewportRender()
             self.viewport.update(depsgraph)
         except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
@@ -54,7 +55,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         """Rendered shading: draw PHRT's image of the viewport's view (see engine/viewport.py)."""
         from . import viewport
         try:
-            if getattr(self, "viewport", None) is None:
+            if self.viewport is None:
                 self.viewport = viewport.ViewportRender()
             self.viewport.draw(self, context, depsgraph)
         except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
