@@ -37,6 +37,9 @@ FLOAT32_EPS = float(np.finfo(np.float32).eps)
 # Reflections are traced on surfaces up to this roughness (a single mirror-direction
 # ray, blended towards the environment as roughness grows; see ``reflection_blend``).
 ROUGHNESS_LIMIT = 0.5
+# A total internal reflection costs this fraction of a bounce: it does not branch, and light that
+# enters a glass block through a side face needs a few of them to get out.
+TIR_BOUNCE_COST = 0.25
 MISS = -1
 
 
@@ -336,8 +339,10 @@ class RadianceTracer:
         return total
 
     def radiance(self, origins, directions, depth):
-        """Radiance arriving along trace-frame rays (N,3)."""
+        """Radiance arriving along trace-frame rays (N,3); ``depth``: the bounces so far,
+        a number or one per ray."""
         n = len(origins)
+        depth = np.broadcast_to(np.asarray(depth, dtype=np.float64), (n,))
         result = np.broadcast_to(self.world, (n, 3)).copy()
         if n == 0:
             return result
@@ -370,29 +375,37 @@ class RadianceTracer:
         fresnel_t = shading.fresnel_dielectric(cos_i, 1.0 / eta)
         reflect_weight = env_fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
         blend = reflection_blend(surface.roughness)
+        depth = depth[idx]
         can_bounce = depth < self.max_bounces
+        transmits = transmissive > 1e-3
+        # Total internal reflection: nothing is refracted, and the bounce costs only
+        # TIR_BOUNCE_COST, so light entering a glass side face can get out again.
+        total_internal = transmits & (fresnel_t >= 1.0)
+        next_depth = depth + np.where(total_internal, TIR_BOUNCE_COST, 1.0)
         reflected = np.broadcast_to(self.world, (len(idx), 3)).copy()
         trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02)
         if np.any(trace_reflection):
             r = np.flatnonzero(trace_reflection)
             direction = shading.reflect(dirs[r], facing[r])
             start = points[r] + geometric_facing[r] * eps[r, None]
-            traced = self.radiance(start, direction, depth + 1)
+            traced = self.radiance(start, direction, next_depth[r])
             reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
         color += reflect_weight * reflected
-        trace_refraction = can_bounce & (transmissive > 1e-3)
+        refracts = transmits & ~total_internal
+        trace_refraction = can_bounce & refracts
         if np.any(trace_refraction):
             t = np.flatnonzero(trace_refraction)
-            direction, total = shading.refract(dirs[t], facing[t], eta[t])
+            direction, _ = shading.refract(dirs[t], facing[t], eta[t])
             start = points[t] - geometric_facing[t] * eps[t, None]
-            through = self.radiance(start, direction, depth + 1)
+            through = self.radiance(start, direction, next_depth[t])
             tint = np.where(entering[t, None], surface.albedo[t], 1.0)
             weight = (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint
-            weight[total] = 0.0  # all of it went into the reflection term
             color[t] += weight * through
-        elif np.any(transmissive > 1e-3):
+        out_of_bounces = refracts & ~can_bounce
+        if np.any(out_of_bounces):
             # Out of bounces inside glass: the environment is the best guess.
-            color += ((transmissive * (1.0 - fresnel_t))[:, None] * self.world)
+            o = np.flatnonzero(out_of_bounces)
+            color[o] += (transmissive[o] * (1.0 - fresnel_t[o]))[:, None] * self.world
         result[idx] = shading.finite(color)
         return result
 
