@@ -52,6 +52,24 @@ class FrameResult:
     problems: list = field(default_factory=list)
 
 
+# Below this many pixels per task, threads cost more than they save.
+PARALLEL_MIN_PIXELS = 20000
+_POOL = None
+
+
+def _map(function, items, pixels):
+    """``[function(item) for item in items]``, on a thread pool when the work is large enough
+    (numpy releases the GIL in its whole-array loops, so lights shade in parallel)."""
+    global _POOL
+    if len(items) < 2 or pixels < PARALLEL_MIN_PIXELS:
+        return [function(item) for item in items]
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+        from .tracer import worker_count
+        _POOL = ThreadPoolExecutor(worker_count(), thread_name_prefix="phrt-shade")
+    return list(_POOL.map(function, items))
+
+
 def _timer():
     return time.perf_counter()
 
@@ -92,10 +110,11 @@ class FrameRenderer:
         layers = self._layer_samples(gbuffer, snapshot, materials)
         # Per layer and light: the pixels the light reaches (facing it, non-negligible irradiance),
         # its direction and irradiance there, and their visibility (shadow maps now, rays later).
+        # Lights are independent and numpy releases the GIL on whole arrays: one task per light.
         visibility = {}
         for layer_name, samples in layers.items():
-            visibility[layer_name] = [light_terms(light, samples, shadow_maps.get(index))
-                                      for index, light in enumerate(snapshot.lights)]
+            visibility[layer_name] = _map(lambda item: light_terms(item[1], samples, shadow_maps.get(item[0])),
+                                          list(enumerate(snapshot.lights)), len(samples["world"]))
         raster_ms = raster_ms + _ms(start)
 
         # -- selection --------------------------------------------------------
@@ -329,12 +348,13 @@ class FrameRenderer:
         for layer_name, samples in layers.items():
             surface = samples["surface"]
             color = surface.emission.copy()
-            for terms in visibility[layer_name]:
-                if len(terms.active) == 0:
-                    continue
-                lit = terms.active
+            def contribution(terms, surface=surface):
                 weight = terms.irradiance * terms.visibility[:, None]
-                color[lit] += shading.brdf_cosine(surface.subset(lit), terms.direction) * weight
+                return terms.active, shading.brdf_cosine(surface.subset(terms.active), terms.direction) * weight
+
+            lit_terms = [terms for terms in visibility[layer_name] if len(terms.active)]
+            for lit, light_color in _map(contribution, lit_terms, len(surface)):
+                color[lit] += light_color
             diffuse_ambient, fresnel = shading.ambient(surface, world)
             color += diffuse_ambient
             transmissive = surface.transmission * (1.0 - surface.metallic)
