@@ -10,6 +10,17 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 from .phrt_addon import defaults
 
 
+def _refresh_candidate_list(self, context):
+    """Tagging or untagging updates the N panel's candidate list at once (when the panels are
+    registered; they own the list)."""
+    if context is None or not hasattr(bpy.types.WindowManager, "phrt_candidates"):
+        return
+    window_manager, scene = getattr(context, "window_manager", None), getattr(context, "scene", None)
+    if window_manager is not None and scene is not None:
+        from .panels import candidates
+        candidates.refresh(window_manager, scene)
+
+
 def _element_fields(owner):
     """The per-element fields, shared by objects and materials."""
     return {
@@ -17,6 +28,7 @@ def _element_fields(owner):
             name="Ray Tracing Candidate",
             description=f"Tag this {owner} as an element that PHRT may ray trace when the heuristic picks it",
             default=False,
+            update=_refresh_candidate_list,
         ),
         "priority": FloatProperty(
             name="Priority (K)",

@@ -162,6 +162,16 @@ def test_candidate_list_is_refreshed_after_a_render_and_selects_on_click(scene):
     assert window_manager.phrt_candidates[window_manager.phrt_candidate_index].name == "GlassSlab"
 
 
+def test_tagging_an_object_updates_the_candidate_list_without_a_render(scene):
+    window_manager = bpy.context.window_manager
+    bpy.ops.phrt.refresh_candidates()
+    assert not window_manager.phrt_candidates["RedCube"].candidate
+    bpy.data.objects["RedCube"].phrt.candidate = True
+    assert window_manager.phrt_candidates["RedCube"].candidate
+    bpy.data.objects["RedCube"].phrt.candidate = False
+    assert not window_manager.phrt_candidates["RedCube"].candidate
+
+
 def test_candidate_list_sorts_by_relevance_and_hides_non_candidates(scene):
     from phrt.panels import candidates
     bpy.ops.render.render()
