@@ -270,8 +270,6 @@ class FrameRenderer:
             if not casters or len(samples["world"]) == 0:
                 continue
             surface = samples["surface"]
-            points_trace = scene.to_trace(samples["world"])
-            eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples))
             for light_index, light in enumerate(snapshot.lights):
                 terms = visibility[layer_name][light_index]
                 if not light.cast_shadows or len(terms.active) == 0:
@@ -286,9 +284,11 @@ class FrameRenderer:
                 if len(local) == 0:
                     continue
                 idx = terms.active[local]
-                _, distance, _ = shading.light_incidence(light, points_trace[idx], scene.origin)
-                origins = points_trace[idx] + surface.normal[idx] * eps[idx, None]
-                blocked = scene.occluded(origins, terms.direction[local], distance - 2 * eps[idx])
+                points_trace = scene.to_trace(samples["world"][idx])  # only the pixels that get rays
+                eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
+                _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
+                origins = points_trace + surface.normal[idx] * eps[:, None]
+                blocked = scene.occluded(origins, terms.direction[local], distance - 2 * eps)
                 terms.visibility[local] = np.where(blocked, 0.0, 1.0)
                 counters.shadow_rays += len(idx)
         counters.shadow_ms = _ms(start)
@@ -524,48 +524,85 @@ def shadow_region(light, bounds, points) -> np.ndarray:
 
 
 class ShadowRegionIndex:
-    """``shadow_region`` for many casters and one light over the same points, without testing
-    every point for every caster: the points are sorted once by one coordinate of their
-    direction from the light (light-space x for the sun), and each caster tests only the
-    window of points whose coordinate can be inside its cylinder or cone (a searchsorted
-    range).  Same answer as ``shadow_region``; O(N log N) once plus O(window) per caster."""
+    """``shadow_region`` for many casters and one light over the same points.
+
+    The points' light-space coordinates are computed once per light: for the sun, two
+    coordinates across the light and one along it; for local lights, the unit direction
+    from the light and the distance.  A caster is then a few float32 operations per point.
+    Once a light has ``SORT_AFTER_QUERIES`` casters, the points are also sorted by one
+    coordinate, and each further caster tests only the window of points that can be in
+    its cylinder or cone (a searchsorted range).  Same answer as ``shadow_region``."""
+
+    SORT_AFTER_QUERIES = 6
 
     def __init__(self, light, points):
         self.light = light
-        self.points = np.asarray(points, dtype=np.float64)
+        points = np.asarray(points, dtype=np.float64)
+        self.n = len(points)
+        self.queries = 0
+        self.order = None
         if light.kind == "SUN":
             direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
             helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-            self.axis = shading.normalize(np.cross(direction, helper))  # perpendicular to the light
-            key = self.points @ self.axis
+            across = shading.normalize(np.cross(direction, helper))
+            self.basis = np.stack([across, np.cross(direction, across), direction])
+            self.coords = (points @ self.basis.T).astype(np.float32)  # (u, v) across, w along
         else:
-            to_point = self.points - np.asarray(light.position, dtype=np.float64)
-            self.axis = None
-            key = to_point[:, 0] / np.maximum(np.sqrt(shading.dot(to_point, to_point)), 1e-30)
-        self.order = np.argsort(key, kind="stable")
-        self.sorted_key = key[self.order]
+            self.origin = np.asarray(light.position, dtype=np.float64)
+            to_point = points - self.origin
+            distance = np.sqrt(shading.dot(to_point, to_point))
+            self.coords = np.concatenate([to_point / np.maximum(distance, 1e-30)[:, None], distance[:, None]],
+                                         axis=1).astype(np.float32)  # unit direction, distance
 
-    def region(self, bounds) -> np.ndarray:
+    def _test(self, coords, bounds):
         low, high = bounds
         centre = (low + high) / 2.0
         radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
         if self.light.kind == "SUN":
-            reach_low, reach_high = centre @ self.axis - radius, centre @ self.axis + radius
+            cu, cv, cw = self.basis @ centre
+            du = coords[:, 0] - np.float32(cu)
+            dv = coords[:, 1] - np.float32(cv)
+            return (du * du + dv * dv <= np.float32(radius * radius)) & (coords[:, 2] > np.float32(cw - radius))
+        to_centre = centre - self.origin
+        distance = float(np.linalg.norm(to_centre))
+        if distance <= radius:
+            return np.ones(len(coords), bool)  # the light is inside the caster's bounds
+        axis = (to_centre / distance).astype(np.float32)
+        cos_cone = np.float32(np.sqrt(max(1.0 - (radius / distance) ** 2, 0.0)))
+        return (coords[:, :3] @ axis >= cos_cone) & (coords[:, 3] > np.float32(distance - radius))
+
+    def _window(self, bounds):
+        """The index range of sorted points that may pass ``_test`` (a superset)."""
+        low, high = bounds
+        centre = (low + high) / 2.0
+        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+        if self.light.kind == "SUN":
+            key = float(self.basis[0] @ centre)
+            reach = radius
         else:
-            to_centre = centre - np.asarray(self.light.position, dtype=np.float64)
+            to_centre = centre - self.origin
             distance = float(np.linalg.norm(to_centre))
             if distance <= radius:
-                return np.ones(len(self.points), bool)
+                return 0, self.n
             # Unit directions within the cone's half angle t of the axis a satisfy |d_x - a_x| <= t.
-            half_angle = float(np.arcsin(min(radius / distance, 1.0)))
-            axis_x = to_centre[0] / distance
-            reach_low, reach_high = axis_x - half_angle - 1e-9, axis_x + half_angle + 1e-9
-        start = np.searchsorted(self.sorted_key, reach_low, side="left")
-        stop = np.searchsorted(self.sorted_key, reach_high, side="right")
-        result = np.zeros(len(self.points), bool)
-        window = self.order[start:stop]
-        if len(window):
-            result[window] = shadow_region(self.light, bounds, self.points[window])
+            key = to_centre[0] / distance
+            reach = float(np.arcsin(min(radius / distance, 1.0)))
+        margin = 1e-5 * (abs(key) + reach) + 1e-6  # float32 keys
+        start = np.searchsorted(self.sorted_key, key - reach - margin, side="left")
+        stop = np.searchsorted(self.sorted_key, key + reach + margin, side="right")
+        return start, stop
+
+    def region(self, bounds) -> np.ndarray:
+        self.queries += 1
+        if self.queries <= self.SORT_AFTER_QUERIES:
+            return self._test(self.coords, bounds)
+        if self.order is None:
+            self.order = np.argsort(self.coords[:, 0], kind="stable")
+            self.sorted_key = self.coords[self.order, 0]
+            self.sorted_coords = self.coords[self.order]
+        start, stop = self._window(bounds)
+        result = np.zeros(self.n, bool)
+        result[self.order[start:stop]] = self._test(self.sorted_coords[start:stop], bounds)
         return result
 
 
