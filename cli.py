@@ -81,14 +81,10 @@ def parse_resolution(text):
 
 def _check_output_dir(path):
     """Raise UserError unless ``path`` can be created and written (creates nothing)."""
-    path = Path(path).resolve()
-    probe = path
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise UserError(f"cannot write to '{path}': '{probe}' is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise UserError(f"cannot write to '{path}': permission denied on '{probe}'")
+    from .phrt_addon.runlog import output_dir_problem
+    problem = output_dir_problem(path)
+    if problem is not None:
+        raise UserError(problem)
 
 
 def _progress(stream):

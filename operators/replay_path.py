@@ -15,13 +15,13 @@ blocking loop), so both write exactly the same files.
 docs/batch.md has the ``blender -b`` command lines.
 """
 
-import os
 from pathlib import Path
 
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..engine import replay
+from ..phrt_addon import runlog
 from ..engine.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
 
 MODE_ITEMS = (
@@ -55,13 +55,9 @@ def output_root(output_dir: str) -> Path:
 
 def check_output_root(root: Path):
     """ReplayError unless the folder ``root`` can be created and written (creates nothing)."""
-    existing = root
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        raise replay.ReplayError(f"cannot write to output folder '{root}': '{existing}' is a file, not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise replay.ReplayError(f"cannot write to output folder '{root}': permission denied on '{existing}'")
+    problem = runlog.output_dir_problem(root)
+    if problem is not None:
+        raise replay.ReplayError(problem)
 
 
 def _path_search(self, context, edit_text):

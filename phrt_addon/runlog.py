@@ -389,6 +389,20 @@ def _read_csv(path):
             for cells in reader if len(cells) == len(header)]
 
 
+def output_dir_problem(path):
+    """Why the folder ``path`` cannot be created and written, or None if it can.
+    Creates nothing: bad input is refused before anything is written."""
+    path = Path(path).resolve()
+    existing = path
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        return f"cannot write to output folder '{path}': '{existing}' is a file, not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"cannot write to output folder '{path}': permission denied on '{existing}'"
+    return None
+
+
 def read_frames(run_dir):
     """Rows of ``frames.csv`` as dicts of typed values (``None`` for empty cells)."""
     return _read_csv(Path(run_dir) / FRAMES_CSV)

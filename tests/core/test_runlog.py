@@ -203,3 +203,13 @@ def test_format_value_cleans_every_non_finite_kind():
         assert runlog.format_value(value) == ""
     assert runlog.format_value(np.int64(3)) == "3"
     assert runlog.format_value(None) == ""
+
+
+def test_output_dir_problem_refuses_a_folder_under_a_file_and_creates_nothing(tmp_path):
+    from phrt.phrt_addon.runlog import output_dir_problem
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("x")
+    assert output_dir_problem(tmp_path / "new" / "run") is None
+    assert not (tmp_path / "new").exists()
+    problem = output_dir_problem(blocker / "run")
+    assert problem is not None and "is a file, not a folder" in problem
