@@ -11,7 +11,6 @@ model and last selection, plus the run log), so a replay made of separate
 """
 from __future__ import annotations
 
-import hashlib
 import sys
 import time
 import traceback
@@ -19,7 +18,7 @@ import traceback
 import numpy as np
 
 from ..phrt_addon.frame import FrameRenderer
-from . import extract, raster
+from . import extract, gpu_resources, raster
 
 _STANDALONE = {}  # scene name -> FrameRenderer when no replay session is active
 ACTIVE_SESSION = None
@@ -35,8 +34,7 @@ def release_caches():
     for renderer in _STANDALONE.values():
         renderer.close()
     _STANDALONE.clear()
-    raster.GEOMETRY_CACHE.retain(set())
-    raster.SHADOW_MAP_CACHE.retain(set())
+    gpu_resources.RESOURCES.release()
     extract.MESH_CACHE._entries.clear()
     extract.TEXTURE_CACHE.clear()
     if ACTIVE_SESSION is not None:
@@ -63,6 +61,8 @@ class ReplaySession:
         global ACTIVE_SESSION
         ACTIVE_SESSION = None
         self.renderer.close()
+        # End of the replay: its GPU resources (meshes, shadow maps, targets) are dropped here.
+        gpu_resources.RESOURCES.release(keep_shaders=True)
         return False
 
 
@@ -70,43 +70,12 @@ class ReplaySession:
 LAST_FRAME = {"rows": [], "problems": [], "stats": {}}
 
 
-def _shadow_key(light, snapshot, size):
-    digest = hashlib.blake2b(digest_size=16)
-    digest.update(repr((light.kind, light.position, light.direction, light.spot_size, size)).encode())
-    for mesh in snapshot.meshes:
-        digest.update(mesh.geometry_key.encode())
-        digest.update(np.asarray(mesh.matrix_world, np.float64).tobytes())
-    return digest.hexdigest()
-
-
 def rasterize(snapshot):
-    """The GPU stage of a frame (needs a GPU context): G-buffer and shadow maps, the maps
-    cached until their light or the geometry changes.  Returns (gbuffer, shadow maps by light
-    index, raster ms, one-time part of it (shader set-up, new shadow maps), GPU upload ms)."""
-    start = time.perf_counter()
-    shadow_maps = {}
-    shadow_render_ms = 0.0
-    with raster.RasterPass(snapshot) as raster_pass:
-        gbuffer = raster_pass.render_gbuffer()
-        if snapshot.meshes:
-            bounds = snapshot.bounds()
-            keys = set()
-            for index, light in enumerate(snapshot.lights):
-                if not light.cast_shadows:
-                    continue
-                key = _shadow_key(light, snapshot, snapshot.settings.shadow_map_size)
-                keys.add(key)
-                maps = raster.SHADOW_MAP_CACHE.get(key)
-                if maps is None:
-                    begin = time.perf_counter()
-                    maps = raster_pass.render_shadow_maps(light, bounds, snapshot.settings.shadow_map_size)
-                    shadow_render_ms += (time.perf_counter() - begin) * 1000.0
-                    raster.SHADOW_MAP_CACHE.put(key, maps)
-                shadow_maps[index] = maps
-            raster.SHADOW_MAP_CACHE.retain(keys)  # a light dragged around must not pile up maps
-        upload_ms = raster_pass.stats["upload_ms"]
-    raster_ms = (time.perf_counter() - start) * 1000.0
-    return gbuffer, shadow_maps, raster_ms, min(shadow_render_ms + upload_ms, raster_ms), upload_ms
+    """The GPU stage of a frame (needs a GPU context): G-buffer, its resolve read-back, and the
+    shadow maps that are missing.  Returns the drawn ``raster.GPUFrame``."""
+    frame = raster.GPUFrame(snapshot)
+    frame.draw()
+    return frame
 
 
 class FinalRender:
@@ -132,14 +101,13 @@ class FinalRender:
                 renderer = _STANDALONE[scene.name] = FrameRenderer()
 
         engine.update_stats("PHRT", "Raster")
-        gbuffer, shadow_maps, raster_ms, raster_setup_ms, upload_ms = rasterize(snapshot)
+        gpu_frame = rasterize(snapshot)
         # No early return on test_break(): Blender 5.0.1 crashes saving a multilayer EXR of a
         # render that wrote no result, and a frame takes well under a second to finish.
 
         engine.update_stats("PHRT", "Selection, tracing, compositing")
-        result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms, raster_setup_ms=raster_setup_ms)
+        result = renderer.render(snapshot, gpu_frame)
         result.stats["extract_ms"] = extract_ms
-        result.stats["gpu_upload_ms"] = upload_ms
         self._write(result, width, height)
         LAST_FRAME["rows"] = result.selection_rows
         LAST_FRAME["problems"] = list(snapshot.problems)

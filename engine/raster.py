@@ -1,136 +1,39 @@
-"""Raster stage on Blender's ``gpu`` module: G-buffer layers and shadow maps.
+"""The raster half of a frame on the GPU: G-buffer, shadow maps, deferred lighting, composite.
 
 Runs inside ``RenderEngine.render()`` (``bl_use_gpu_context = True`` gives a GPU
-context, even in background mode, where llvmpipe serves it on the CPU).
+context, even in background mode, where llvmpipe serves it on the CPU) or
+``view_draw()``.  ``GPUFrame`` implements the core's ``RasterFrame`` protocol
+(``phrt_addon/frame.py``):
 
-- ``GeometryCache`` (CPU, module level, survives between frames and engine
-  instances) keeps each mesh's corner arrays ready for upload, keyed by geometry
-  key, so an unchanged mesh is converted once per replay.
-- ``RasterPass`` owns the GPU objects of one ``render()`` call (shaders, vertex
-  buffers, textures, framebuffers).  Use it as a context manager: everything is
-  released before ``render()`` returns, as the GPU module requires.
-- Shadow maps are read back once and kept as numpy arrays (``ShadowMapCache``)
-  until a light or the geometry it sees changes; the lookups happen in numpy
-  (``phrt_addon/shading.py``).
+1. ``draw()``: the opaque layer, then the nearest transparent surfaces in front of
+   it, into textures kept by ``engine/gpu_resources.py``; a resolve pass writes the
+   front element id and the front normal and depth, which are read back (the
+   selection's A, P, D and the Normal and Depth passes).  Shadow maps are rendered
+   only when their light or the geometry changed and stay on the GPU.
+2. ``gbuffer()``: the full layers read back, only when rays will be traced.
+3. ``shade(traced)``: one additive full-screen lighting pass per light (shadow-map
+   lookup, or the traced visibility where the tracer replaced it), then the composite
+   pass (ambient, reflections, transparency, traced reflections and refractions),
+   and one read-back of the final image.
 
-Read-back follows PLATFORM-NOTES: flat ``gpu.types.Buffer`` + reshape.
+Read-back follows PLATFORM-NOTES: a flat ``gpu.types.Buffer`` and a reshape.
 """
 from __future__ import annotations
 
+import hashlib
+import time
+
 import numpy as np
 
+from ..phrt_addon import shading
 from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
 from ..phrt_addon.scene import SceneSnapshot
 from ..phrt_addon.shadowmap import ShadowMap, light_views
+from . import shaders
+from .gpu_resources import RESOURCES, GPUResources, ShadowAtlas, gpu_module
 
-GBUFFER_VERT = """
-void main() {
-  vec4 world = model * vec4(pos, 1.0);
-  v_position = world.xyz;
-  v_normal = transpose(inverse(mat3(model))) * nor;
-  v_uv = uv;
-  gl_Position = frame.view_proj * world;
-}
-"""
-
-GBUFFER_FRAG = """
-void main() {
-  vec3 n = normalize(v_normal);
-  if (!gl_FrontFacing) { n = -n; }
-  vec4 albedo = base_color;
-  /* Wrap like the tracer (sample_texture): GPUTexture clamps to its edge by default. */
-  if (params.z > 0.5) { albedo *= texture(base_tex, fract(v_uv)); }
-  albedo = clamp(albedo, 0.0, 1.0);
-  out_position = vec4(v_position, 1.0);
-  out_normal = vec4(n, params.x);
-  /* albedo as 8-bit sqrt-encoded RGB and metallic as 8 bits: enough for shading inputs */
-  uvec4 bits = uvec4(round(vec4(sqrt(albedo.rgb), clamp(params.y, 0.0, 1.0)) * 255.0));
-  out_ids = uint(ids);
-  out_material = bits.r | (bits.g << 8u) | (bits.b << 16u) | (bits.a << 24u);
-}
-"""
-
-DEPTH_VERT = """
-void main() {
-  gl_Position = frame.view_proj * (model * vec4(pos, 1.0));
-}
-"""
-
-DEPTH_FRAG = """
-void main() {
-}
-"""
-
-MAX_TEXTURE_SIZE = 2048
-
-
-def _gpu():
-    import gpu  # only inside render(): module-level gpu drawing is unavailable in background mode
-    return gpu
-
-
-def pack_ids(material_index: int, element_index: int) -> int:
-    """Material (16 bits) and element+1 (15 bits) in one uint; the G-buffer's id target."""
-    return ((int(material_index) & 0xFFFF) << 15) | ((int(element_index) + 1) & 0x7FFF)
-
-
-MAX_ELEMENTS = 0x7FFF - 1
-MAX_MATERIALS = 0xFFFF
-
-
-class GeometryCache:
-    """Corner arrays ready for GPU upload, keyed by mesh geometry key (CPU only)."""
-
-    def __init__(self):
-        self._entries = {}
-
-    def get(self, mesh):
-        entry = self._entries.get(mesh.geometry_key)
-        if entry is None:
-            corners = mesh.triangles.reshape(-1)
-            uvs = mesh.corner_uvs if mesh.corner_uvs is not None else np.zeros((len(corners), 2), np.float32)
-            groups = [(material, element, np.ascontiguousarray(
-                (tris[:, None] * 3 + np.arange(3)[None, :]).astype(np.int32)))
-                for material, element, tris in mesh.material_groups()]
-            entry = {
-                "pos": np.ascontiguousarray(mesh.positions[corners], dtype=np.float32),
-                "nor": np.ascontiguousarray(mesh.corner_normals, dtype=np.float32),
-                "uv": np.ascontiguousarray(uvs, dtype=np.float32),
-                "groups": groups,
-            }
-            self._entries[mesh.geometry_key] = entry
-        return entry
-
-    def retain(self, keys):
-        """Forget geometry not used by the current frame (bounded memory across scenes)."""
-        for key in list(self._entries):
-            if key not in keys:
-                del self._entries[key]
-
-    def __len__(self):
-        return len(self._entries)
-
-
-class ShadowMapCache:
-    """Read-back shadow maps kept between frames while light and geometry are unchanged."""
-
-    def __init__(self):
-        self._maps = {}
-
-    def get(self, key):
-        return self._maps.get(key)
-
-    def put(self, key, shadow_maps):
-        self._maps[key] = shadow_maps
-
-    def retain(self, keys):
-        for key in list(self._maps):
-            if key not in keys:
-                del self._maps[key]
-
-
-GEOMETRY_CACHE = GeometryCache()
-SHADOW_MAP_CACHE = ShadowMapCache()
+# Element indices are stored +1 in a 32-bit target (0 = no element).
+MAX_ELEMENTS = 0xFFFFFFFF - 1
 
 
 def _matrix_list(matrix) -> list:
@@ -138,257 +41,459 @@ def _matrix_list(matrix) -> list:
     return np.asarray(matrix, dtype=np.float32).T.ravel().tolist()
 
 
-class RasterPass:
-    """GPU resources of one render() call. ``with RasterPass(snapshot) as raster: ...``"""
+def _ms(start):
+    return (time.perf_counter() - start) * 1000.0
 
-    def __init__(self, snapshot: SceneSnapshot, geometry_cache: GeometryCache = GEOMETRY_CACHE):
+
+def _model_relative(matrix_world, origin):
+    model = np.array(matrix_world, dtype=np.float64)
+    model[:3, 3] -= origin
+    return model
+
+
+def _ubo(gpu, values):
+    values = np.ascontiguousarray(values, dtype=np.float32).ravel()
+    return gpu.types.GPUUniformBuf(gpu.types.Buffer("FLOAT", values.size, values))
+
+
+def shadow_key(light, snapshot, size) -> str:
+    """Identifies a light's shadow maps: the light's own parameters and every mesh's content
+    and placement (what the maps see)."""
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((light.kind, tuple(light.position), tuple(light.direction), light.spot_size, size)).encode())
+    for mesh in snapshot.meshes:
+        digest.update(mesh.geometry_key.encode())
+        digest.update(np.asarray(mesh.matrix_world, np.float64).tobytes())
+    return digest.hexdigest()
+
+
+def casts_raster_shadow(material) -> bool:
+    """Glass and water do not cast raster shadows."""
+    return material.transmission <= 0.5
+
+
+class GPUFrame:
+    """The GPU work of one frame. ``draw()`` first; then the core calls ``gbuffer()`` if it
+    traces and ``shade()`` once."""
+
+    def __init__(self, snapshot: SceneSnapshot, resources: GPUResources = RESOURCES):
         self.snapshot = snapshot
-        self.geometry_cache = geometry_cache
-        self.stats = {"upload_ms": 0.0, "triangles": 0}
-        self._gpu_objects = []
+        self.resources = resources
+        self.width, self.height = snapshot.camera.width, snapshot.camera.height
+        self.materials = shading.MaterialTable(snapshot.materials)
+        self.raster_ms = 0.0
+        self.setup_ms = 0.0
+        self.stats = {}
+        self._gbuffer = None
+        self._transparent_drawn = False
 
-    # -- lifetime -----------------------------------------------------------
-    def __enter__(self):
-        import time
-        gpu = _gpu()
+    # -- protocol --------------------------------------------------------------
+    def draw(self):
+        """G-buffer, resolve and its read-back, shadow maps; sets raster_ms and setup_ms."""
+        gpu = gpu_module()
         start = time.perf_counter()
-        self.gbuffer_shader = self._make_shader(gpu, GBUFFER_VERT, GBUFFER_FRAG, gbuffer=True)
-        self.depth_shader = self._make_shader(gpu, DEPTH_VERT, DEPTH_FRAG, gbuffer=False)
-        white = gpu.types.Buffer("FLOAT", 4, [1.0, 1.0, 1.0, 1.0])
-        self.white_texture = gpu.types.GPUTexture((1, 1), format="RGBA32F", data=white)
-        self.textures = {}
-        self.batches = []  # (mesh, [(material, element, batch)])
+        created_before = sum(self.resources.created[kind] for kind in ("shader", "upload", "shadow_map", "target"))
+        setup_start = time.perf_counter()
+        self._shaders = {name: self.resources.shader(name) for name in ("gbuffer", "resolve", "lighting",
+                                                                        "composite", "shadow")}
+        self.targets = self.resources.targets(self.width, self.height)
+        self.material_table = self.resources.material_table(self.materials)
+        self._draw_list = []
         keys = set()
         for mesh in self.snapshot.meshes:
             if mesh.n_triangles == 0:
                 continue
             keys.add(mesh.geometry_key)
-            self.batches.append((mesh, self._upload(gpu, mesh)))
-            self.stats["triangles"] += mesh.n_triangles
-        self.geometry_cache.retain(keys)
-        self.stats["upload_ms"] = (time.perf_counter() - start) * 1000.0
-        return self
+            self._draw_list.append((mesh, self.resources.mesh_batches(mesh)[1]))
+        self.resources.retain_meshes(keys)
+        textures = {}
+        for index, material in enumerate(self.snapshot.materials):
+            texture = self.resources.material_texture(material)
+            if texture is not None:
+                textures[index] = texture
+        self._material_textures = textures
+        created_after = sum(self.resources.created[kind] for kind in ("shader", "upload", "shadow_map", "target"))
+        setup_ms = _ms(setup_start) if created_after > created_before else 0.0
+        setup_ms += self._ensure_shadow_maps(gpu)
+        self._draw_gbuffer(gpu)
+        self.resources.frames_drawn += 1
+        self._resolve(gpu)
+        self.setup_ms = setup_ms
+        self.raster_ms = _ms(start)
+        self.stats["gbuffer_ms"] = self.raster_ms - setup_ms
 
-    def __exit__(self, *exc):
-        # Drop every GPU object while the context is still current.
-        self.batches = []
-        self.textures = {}
-        self.white_texture = None
-        self.gbuffer_shader = None
-        self.depth_shader = None
-        self._gpu_objects.clear()
-        return False
+    def gbuffer(self) -> GBuffer:
+        """Both layers read back (float32 positions relative to the camera)."""
+        if self._gbuffer is None:
+            gpu = gpu_module()
+            framebuffer = gpu.types.GPUFrameBuffer(color_slots=(
+                self.targets["opaque_position"], self.targets["opaque_normal"], self.targets["opaque_element"],
+                self.targets["transparent_position"], self.targets["transparent_normal"],
+                self.targets["transparent_element"]))
+            opaque = self._read_layer(gpu, framebuffer, 0)
+            transparent = self._read_layer(gpu, framebuffer, 3) if self._transparent_drawn else \
+                GBufferLayer.empty(self.width, self.height)
+            self._gbuffer = GBuffer(opaque=opaque, transparent=transparent, origin=self.snapshot.camera.position,
+                                    view_depth=self.view_depth)
+        return self._gbuffer
 
-    # -- set-up -------------------------------------------------------------
-    @staticmethod
-    def _make_shader(gpu, vert, frag, gbuffer):
-        info = gpu.types.GPUShaderCreateInfo()
-        info.typedef_source("struct FrameData { mat4 view_proj; };")
-        info.uniform_buf(0, "FrameData", "frame")
-        info.push_constant("MAT4", "model")
-        info.vertex_in(0, "VEC3", "pos")
-        if gbuffer:
-            interface = gpu.types.GPUStageInterfaceInfo("phrt_gbuffer_iface")
-            interface.smooth("VEC3", "v_position")
-            interface.smooth("VEC3", "v_normal")
-            interface.smooth("VEC2", "v_uv")
-            info.push_constant("VEC4", "base_color")
-            info.push_constant("VEC4", "params")  # roughness, metallic, has_texture, unused
-            info.push_constant("INT", "ids")
-            info.sampler(0, "FLOAT_2D", "base_tex")
-            info.vertex_in(1, "VEC3", "nor")
-            info.vertex_in(2, "VEC2", "uv")
-            info.vertex_out(interface)
-            info.fragment_out(0, "VEC4", "out_position")
-            info.fragment_out(1, "VEC4", "out_normal")
-            info.fragment_out(2, "UINT", "out_ids")
-            info.fragment_out(3, "UINT", "out_material")
-        info.vertex_source(vert)
-        info.fragment_source(frag)
-        return gpu.shader.create_from_info(info)
+    def read_albedo(self):
+        """(opaque, transparent) albedo + metallic, (h, w, 4): only the reference lighting needs them."""
+        gpu = gpu_module()
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(self.targets["opaque_albedo"],
+                                                            self.targets["transparent_albedo"]))
+        result = []
+        for slot in (0, 1):
+            stored = self._read(gpu, framebuffer, slot, "FLOAT", 4)
+            stored[..., :3] *= stored[..., :3]  # stored as sqrt
+            result.append(stored)
+        return tuple(result)
 
-    def _upload(self, gpu, mesh):
-        entry = self.geometry_cache.get(mesh)
-        fmt = gpu.types.GPUVertFormat()
-        fmt.attr_add(id="pos", comp_type="F32", len=3, fetch_mode="FLOAT")
-        fmt.attr_add(id="nor", comp_type="F32", len=3, fetch_mode="FLOAT")
-        fmt.attr_add(id="uv", comp_type="F32", len=2, fetch_mode="FLOAT")
-        vbo = gpu.types.GPUVertBuf(fmt, len(entry["pos"]))
-        vbo.attr_fill("pos", entry["pos"])
-        vbo.attr_fill("nor", entry["nor"])
-        vbo.attr_fill("uv", entry["uv"])
-        batches = []
-        for material, element, indices in entry["groups"]:
-            ibo = gpu.types.GPUIndexBuf(type="TRIS", seq=indices)
-            batches.append((material, element, gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo)))
-        return batches
+    def shade(self, traced) -> np.ndarray:
+        """Deferred lighting and composite with the tracer's results; returns Combined (h, w, 4)."""
+        gpu = gpu_module()
+        start = time.perf_counter()
+        uploads = self._upload_traced(gpu, traced)
+        self.stats["traced_upload_ms"] = _ms(start)
+        self._light(gpu, uploads)
+        combined = self._composite(gpu, uploads)
+        self.stats["lighting_ms"] = _ms(start)
+        return combined
 
-    def _texture(self, gpu, material):
-        if material.texture is None:
-            return None
-        key = material.texture_key or material.name
-        texture = self.textures.get(key)
-        if texture is None:
-            image = np.asarray(material.texture, dtype=np.float32)
-            height, width = image.shape[:2]
-            step = max(1, int(np.ceil(max(height, width) / MAX_TEXTURE_SIZE)))
-            image = np.ascontiguousarray(image[::step, ::step, :4])
-            height, width = image.shape[:2]
-            buffer = gpu.types.Buffer("FLOAT", width * height * 4, image.ravel())
-            texture = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buffer)
-            self.textures[key] = texture
-        return texture
-
-    # -- drawing ------------------------------------------------------------
-    def _frame_ubo(self, gpu, view_proj):
-        return gpu.types.GPUUniformBuf(gpu.types.Buffer("FLOAT", 16, _matrix_list(view_proj)))
-
-    @staticmethod
-    def _model_relative(matrix_world, origin):
-        model = np.array(matrix_world, dtype=np.float64)
-        model[:3, 3] -= origin
-        return model
-
-    def render_gbuffer(self) -> GBuffer:
-        """Draw the opaque layer, read it back, then the nearest transparent surfaces in
-        front of it (depth test against the opaque depth), and read those back."""
-        gpu = _gpu()
+    # -- drawing -----------------------------------------------------------------
+    def _camera_ubo(self, gpu, traced_flags=(0.0, 0.0, 0.0)):
         camera = self.snapshot.camera
-        width, height = camera.width, camera.height
-        origin = camera.position
-        # view @ translate(origin): the camera sits at the origin, so positions relative
-        # to it keep float32 precision at any world coordinate.
-        view_relative = camera.view_matrix.copy()
-        view_relative[:3, 3] = (camera.view_matrix @ np.r_[origin, 1.0])[:3]
-        view_proj = np.asarray(camera.projection, dtype=np.float64) @ view_relative
-        ubo = self._frame_ubo(gpu, view_proj)
+        values = np.zeros(12, np.float32)
+        values[:3] = camera.forward
+        values[3] = 1.0 if camera.ortho else 0.0
+        values[4:7] = np.asarray(self.snapshot.world_color, np.float64)[:3]
+        values[8:11] = traced_flags
+        return _ubo(gpu, values)
 
-        tex_position = gpu.types.GPUTexture((width, height), format="RGBA32F")
-        tex_normal = gpu.types.GPUTexture((width, height), format="RGBA32F")
-        tex_ids = gpu.types.GPUTexture((width, height), format="R32UI")
-        tex_material = gpu.types.GPUTexture((width, height), format="R32UI")
-        tex_depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
-        framebuffer = gpu.types.GPUFrameBuffer(depth_slot=tex_depth, color_slots=(tex_position, tex_normal, tex_ids, tex_material))
-        materials = self.snapshot.materials
-        transparent = np.array([m.is_transparent for m in materials], dtype=bool)
-        has_transparent = any(transparent[material] for _, groups in self.batches for material, _, _ in groups)
-        shader = self.gbuffer_shader
-        try:
+    def _view_proj(self):
+        """Projection @ view with the camera at the origin: positions relative to the camera keep
+        float32 precision at any world coordinate."""
+        camera = self.snapshot.camera
+        view_relative = camera.view_matrix.copy()
+        view_relative[:3, 3] = (camera.view_matrix @ np.r_[camera.position, 1.0])[:3]
+        return np.asarray(camera.projection, dtype=np.float64) @ view_relative
+
+    def _draw_gbuffer(self, gpu):
+        targets = self.targets
+        origin = self.snapshot.camera.position
+        ubo = _ubo(gpu, np.r_[np.asarray(_matrix_list(self._view_proj()), np.float32), np.zeros(4, np.float32)])
+        transparent = np.array([m.is_transparent for m in self.snapshot.materials], dtype=bool)
+        shader = self._shaders["gbuffer"]
+        white = self.resources.placeholder(1.0)
+        has_transparent = any(transparent[material] for _, groups in self._draw_list for material, _, _ in groups)
+        for layer in ("opaque", "transparent"):
+            framebuffer = gpu.types.GPUFrameBuffer(
+                depth_slot=targets["opaque_depth"],
+                color_slots=tuple(targets[f"{layer}_{name}"] for name in ("position", "normal", "albedo", "element")))
             with framebuffer.bind():
-                framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                gpu.state.depth_test_set("LESS_EQUAL")
-                gpu.state.depth_mask_set(True)
-                gpu.state.face_culling_set("NONE")
-                gpu.state.blend_set("NONE")
-                shader.bind()
-                shader.uniform_block("frame", ubo)
-                self._draw_groups(gpu, shader, origin, lambda material: not transparent[material])
-                opaque = self._read_layer(gpu, framebuffer, width, height)
-                if has_transparent:
+                gpu.state.viewport_set(0, 0, self.width, self.height)
+                if layer == "opaque":
+                    framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+                else:
                     # Keep the opaque depth: only transparent surfaces in front of it pass.
                     framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
-                    self._draw_groups(gpu, shader, origin, lambda material: bool(transparent[material]))
-                    transparent_layer = self._read_layer(gpu, framebuffer, width, height)
-                else:
-                    transparent_layer = GBufferLayer.empty(width, height)
-        finally:
-            gpu.state.depth_test_set("NONE")
-            gpu.state.depth_mask_set(False)
-            del framebuffer, tex_position, tex_normal, tex_ids, tex_material, tex_depth, ubo
+                if layer == "opaque" or has_transparent:
+                    gpu.state.depth_test_set("LESS_EQUAL")
+                    gpu.state.depth_mask_set(True)
+                    gpu.state.face_culling_set("NONE")
+                    gpu.state.blend_set("NONE")
+                    shader.bind()
+                    shader.uniform_block("frame", ubo)
+                    wanted = (lambda m: not transparent[m]) if layer == "opaque" else (lambda m: bool(transparent[m]))
+                    self._draw_groups(shader, origin, wanted, white)
+                    gpu.state.depth_test_set("NONE")
+                    gpu.state.depth_mask_set(False)
+        self._transparent_drawn = has_transparent
 
-        forward = camera.forward
-        front = np.where(transparent_layer.covered[..., None], transparent_layer.position, opaque.position)
-        covered = opaque.covered | transparent_layer.covered
-        view_depth = front.astype(np.float64) @ forward  # distance along the view axis (both projections)
-        view_depth = np.where(covered, view_depth, np.inf).astype(np.float32)
-        return GBuffer(opaque=opaque, transparent=transparent_layer, origin=origin, view_depth=view_depth)
-
-    def _draw_groups(self, gpu, shader, origin, wanted):
-        materials = self.snapshot.materials
-        for mesh, groups in self.batches:
-            shader.uniform_float("model", _matrix_list(self._model_relative(mesh.matrix_world, origin)))
+    def _draw_groups(self, shader, origin, wanted, white):
+        for mesh, groups in self._draw_list:
+            shader.uniform_float("model", _matrix_list(_model_relative(mesh.matrix_world, origin)))
             for material_index, element_index, batch in groups:
                 if not wanted(material_index):
                     continue
-                material = materials[material_index]
-                texture = self._texture(gpu, material)
-                shader.uniform_float("base_color", (*material.base_color[:3], 1.0))
-                shader.uniform_float("params", (float(material.roughness), float(material.metallic),
+                texture = self._material_textures.get(material_index)
+                shader.uniform_float("base_color", (*self.materials.base_color[material_index], 1.0))
+                shader.uniform_float("params", (float(self.materials.roughness[material_index]),
+                                                float(self.materials.metallic[material_index]),
                                                 1.0 if texture is not None else 0.0, 0.0))
-                shader.uniform_int("ids", pack_ids(material_index, element_index))
-                shader.uniform_sampler("base_tex", texture if texture is not None else self.white_texture)
+                shader.uniform_int("ids", (int(material_index), int(element_index)))
+                shader.uniform_sampler("base_tex", texture if texture is not None else white)
                 batch.draw(shader)
 
-    @staticmethod
-    def _read_layer(gpu, framebuffer, width, height) -> GBufferLayer:
-        n = width * height
-        buffer = gpu.types.Buffer("FLOAT", n * 4)
-        framebuffer.read_color(0, 0, width, height, 4, 0, "FLOAT", data=buffer)
-        position = np.asarray(buffer, dtype=np.float32).reshape(height, width, 4).copy()
-        buffer = gpu.types.Buffer("FLOAT", n * 4)
-        framebuffer.read_color(0, 0, width, height, 4, 1, "FLOAT", data=buffer)
-        normal = np.asarray(buffer, dtype=np.float32).reshape(height, width, 4).copy()
-        ids = np.empty((height, width, 2), np.uint32)
-        for slot in (2, 3):  # R32UI targets (RG32UI read-back returned zeros on llvmpipe)
-            ids_buffer = gpu.types.Buffer("UINT", n)
-            framebuffer.read_color(0, 0, width, height, 1, slot, "UINT", data=ids_buffer)
-            ids[..., slot - 2] = np.asarray(ids_buffer, dtype=np.uint32).reshape(height, width)
-        return decode_layer(position, normal, ids)
+    def _fullscreen(self, gpu, name, framebuffer, bind):
+        shader = self._shaders[name]
+        with framebuffer.bind():
+            gpu.state.viewport_set(0, 0, self.width, self.height)
+            gpu.state.depth_test_set("NONE")
+            gpu.state.depth_mask_set(False)
+            shader.bind()
+            bind(shader)
+            self.resources.fullscreen_batch(shader).draw(shader)
 
-    # -- shadow maps --------------------------------------------------------
-    def render_shadow_maps(self, light, bounds, size) -> list[ShadowMap]:
-        """Depth maps of all geometry seen from ``light`` (1 view for sun/spot, 6 for point/area)."""
-        gpu = _gpu()
-        maps = []
-        shader = self.depth_shader
-        for view in light_views(light, bounds, size):
-            texture = gpu.types.GPUTexture((view.size, view.size), format="DEPTH_COMPONENT32F")
-            framebuffer = gpu.types.GPUFrameBuffer(depth_slot=texture)
-            ubo = self._frame_ubo(gpu, view.view_proj_relative)
-            try:
-                with framebuffer.bind():
-                    framebuffer.clear(depth=1.0)
-                    gpu.state.depth_test_set("LESS_EQUAL")
-                    gpu.state.depth_mask_set(True)
-                    # Back faces into the map (front-face culling off: two-sided cards must cast).
-                    gpu.state.face_culling_set("NONE")
-                    shader.bind()
-                    shader.uniform_block("frame", ubo)
-                    for mesh, groups in self.batches:
-                        shader.uniform_float("model", _matrix_list(self._model_relative(mesh.matrix_world, view.origin)))
-                        for material_index, _, batch in groups:
-                            if self.snapshot.materials[material_index].transmission > 0.5:
-                                continue  # glass and water do not cast raster shadows
+    def _bind_layers(self, shader, albedo=True, element=False):
+        for layer in ("opaque", "transparent"):
+            names = ["position", "normal"] + (["albedo"] if albedo else []) + (["element"] if element else [])
+            for name in names:
+                shader.uniform_sampler(f"{layer}_{name}", self.targets[f"{layer}_{name}"])
+
+    def _resolve(self, gpu):
+        targets = self.targets
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(targets["normal_depth"], targets["front_element"]))
+        camera_ubo = self._camera_ubo(gpu)
+
+        def bind(shader):
+            shader.uniform_block("camera", camera_ubo)
+            self._bind_layers(shader, albedo=False, element=True)
+
+        gpu.state.blend_set("NONE")
+        self._fullscreen(gpu, "resolve", framebuffer, bind)
+        normal_depth = self._read(gpu, framebuffer, 0, "FLOAT", 4)
+        element = self._read(gpu, framebuffer, 1, "UINT", 1)
+        depth = normal_depth[..., 3]
+        self.view_depth = np.where(depth < 1e9, depth, np.inf).astype(np.float32)
+        self.front_normal = np.ascontiguousarray(normal_depth[..., :3])
+        self.front_element = element.astype(np.int64) - 1
+
+    # -- shadow maps ---------------------------------------------------------------
+    def _ensure_shadow_maps(self, gpu) -> float:
+        """Render the maps that are missing (new light, moved light, changed geometry);
+        returns the ms spent (one-time work)."""
+        self.atlases = {}
+        snapshot = self.snapshot
+        if not self._draw_list:
+            return 0.0
+        start = time.perf_counter()
+        drawn = False
+        bounds = None
+        keys = set()
+        size = int(snapshot.settings.shadow_map_size)
+        for index, light in enumerate(snapshot.lights):
+            if not light.cast_shadows:
+                continue
+            key = shadow_key(light, snapshot, size)
+            keys.add(key)
+            atlas = self.resources.shadow_atlas(key)
+            if atlas is None:
+                if bounds is None:
+                    bounds = snapshot.bounds()
+                atlas = self._render_atlas(gpu, light, bounds, size)
+                self.resources.put_shadow_atlas(key, atlas)
+                drawn = True
+            self.atlases[index] = atlas
+        self.resources.retain_shadows(keys)
+        return _ms(start) if drawn else 0.0
+
+    def _render_atlas(self, gpu, light, bounds, size) -> ShadowAtlas:
+        views = light_views(light, bounds, size)
+        face = views[0].size
+        columns = min(len(views), shaders.ATLAS_COLUMNS)
+        rows = -(-len(views) // shaders.ATLAS_COLUMNS)
+        atlas_size = (face * columns, face * rows)
+        texture = gpu.types.GPUTexture(atlas_size, format="R32F")
+        depth = gpu.types.GPUTexture(atlas_size, format="DEPTH_COMPONENT32F")
+        framebuffer = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=(texture,))
+        shader = self._shaders["shadow"]
+        with framebuffer.bind():
+            framebuffer.clear(color=(float(max(v.far for v in views)), 0.0, 0.0, 0.0), depth=1.0)
+            gpu.state.depth_test_set("LESS_EQUAL")
+            gpu.state.depth_mask_set(True)
+            # Two-sided: cards and open meshes must cast from both sides.
+            gpu.state.face_culling_set("NONE")
+            gpu.state.blend_set("NONE")
+            shader.bind()
+            for tile, view in enumerate(views):
+                column, row = tile % shaders.ATLAS_COLUMNS, tile // shaders.ATLAS_COLUMNS
+                gpu.state.viewport_set(column * face, row * face, face, face)
+                ubo = _ubo(gpu, np.r_[np.asarray(_matrix_list(view.view_proj_relative), np.float32),
+                                      view.view[2, :3].astype(np.float32), np.float32(0.0)])
+                shader.uniform_block("frame", ubo)
+                for mesh, groups in self._draw_list:
+                    shader.uniform_float("model", _matrix_list(_model_relative(mesh.matrix_world, view.origin)))
+                    for material_index, _, batch in groups:
+                        if casts_raster_shadow(self.snapshot.materials[material_index]):
                             batch.draw(shader)
-                    buffer = gpu.types.Buffer("FLOAT", view.size * view.size)
-                    framebuffer.read_depth(0, 0, view.size, view.size, data=buffer)
-                    depth = np.asarray(buffer, dtype=np.float32).reshape(view.size, view.size).copy()
-            finally:
+            gpu.state.depth_test_set("NONE")
+            gpu.state.depth_mask_set(False)
+        gpu.state.viewport_set(0, 0, self.width, self.height)
+        del framebuffer, depth
+        return ShadowAtlas(texture=texture, views=views, face_size=face)
+
+    def read_shadow_maps(self) -> dict:
+        """The shadow maps as numpy ``ShadowMap``s (the reference lighting and tests only)."""
+        gpu = gpu_module()
+        result = {}
+        for index, atlas in self.atlases.items():
+            width, height = atlas.texture.width, atlas.texture.height
+            framebuffer = gpu.types.GPUFrameBuffer(color_slots=(atlas.texture,))
+            buffer = gpu.types.Buffer("FLOAT", width * height)
+            with framebuffer.bind():
+                framebuffer.read_color(0, 0, width, height, 1, 0, "FLOAT", data=buffer)
+            texels = np.asarray(buffer, dtype=np.float32).reshape(height, width)
+            maps = []
+            for tile, view in enumerate(atlas.views):
+                column, row = tile % shaders.ATLAS_COLUMNS, tile // shaders.ATLAS_COLUMNS
+                face = atlas.face_size
+                maps.append(ShadowMap.from_linear(view, texels[row * face:(row + 1) * face,
+                                                               column * face:(column + 1) * face]))
+            result[index] = maps
+        return result
+
+    # -- lighting and composite ------------------------------------------------------
+    def _texture(self, gpu, image):
+        image = np.ascontiguousarray(image, dtype=np.float32)
+        height, width = image.shape[:2]
+        buffer = gpu.types.Buffer("FLOAT", image.size, image.ravel())
+        self.resources.created["traced"] += 1
+        self.resources.freed["traced"] += 1  # dropped with this frame
+        return gpu.types.GPUTexture((width, height), format="RGBA32F" if image.ndim == 3 else "R32F", data=buffer)
+
+    def _upload_traced(self, gpu, traced):
+        """Textures of what the tracer computed: per light and layer a visibility image (-1 where
+        the shadow map stays), reflection and refraction radiance (alpha 1 where traced)."""
+        n = self.width * self.height
+        uploads = {"visibility": {}, "reflection": {}, "refraction": None}
+        if traced is None:
+            return uploads
+        for (layer, light_index), (pixels, visibility) in traced.shadow_visibility.items():
+            image = np.full(n, -1.0, np.float32)
+            image[pixels] = visibility
+            uploads["visibility"][(layer, light_index)] = self._texture(gpu, image.reshape(self.height, self.width))
+        for layer, (pixels, radiance) in traced.reflection.items():
+            image = np.zeros((n, 4), np.float32)
+            image[pixels, :3] = radiance
+            image[pixels, 3] = 1.0
+            uploads["reflection"][layer] = self._texture(gpu, image.reshape(self.height, self.width, 4))
+        if traced.refraction is not None:
+            pixels, radiance = traced.refraction
+            image = np.zeros((n, 4), np.float32)
+            image[pixels, :3] = radiance
+            image[pixels, 3] = 1.0
+            uploads["refraction"] = self._texture(gpu, image.reshape(self.height, self.width, 4))
+        return uploads
+
+    def _light_ubo(self, gpu, index, light):
+        camera_position = self.snapshot.camera.position
+        values = np.zeros((6 * 16 + 6 * 4 + 6 * 4,), np.float32)
+        atlas = self.atlases.get(index) if light.cast_shadows else None
+        if atlas is not None:
+            for face, view in enumerate(atlas.views):
+                values[face * 16:(face + 1) * 16] = _matrix_list(view.view_proj_relative)
+                values[96 + face * 4:96 + face * 4 + 3] = view.view[2, :3]
+        tail = values[120:]
+        tail[0:3] = light.color
+        tail[3] = shaders.LIGHT_KIND_CODES.get(light.kind, 1)
+        tail[4:7] = np.asarray(light.position, np.float64) - camera_position
+        tail[7] = max(float(light.radius), 1e-3)
+        tail[8:11] = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+        if light.kind == "SPOT":
+            outer = np.cos(light.spot_size / 2.0)
+            blend = max(float(light.spot_blend), 1e-4)
+            tail[12] = outer
+            tail[13] = outer + (1.0 - outer) * blend
+        tail[14] = 1.0 if atlas is not None else 0.0
+        if atlas is not None:
+            view = atlas.views[0]
+            tail[16:19] = camera_position - view.origin
+            tail[19] = len(atlas.views)
+            tail[20:24] = (view.texel_angle, view.near, 1.0 if view.ortho else 0.0, atlas.face_size)
+        return values
+
+    def _light(self, gpu, uploads):
+        targets = self.targets
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(targets["opaque_light"], targets["transparent_light"]))
+        with framebuffer.bind():
+            framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
+        lights = self.snapshot.lights
+        if not lights:
+            return
+        camera_ubo = self._camera_ubo(gpu)
+        no_visibility = self.resources.placeholder(-1.0)
+        shader = self._shaders["lighting"]
+        gpu.state.blend_set("ADDITIVE_PREMULT")
+        try:
+            with framebuffer.bind():
+                gpu.state.viewport_set(0, 0, self.width, self.height)
                 gpu.state.depth_test_set("NONE")
                 gpu.state.depth_mask_set(False)
-                del framebuffer, texture, ubo
-            maps.append(ShadowMap(view=view, depth=depth))
-        return maps
+                shader.bind()
+                shader.uniform_block("camera", camera_ubo)
+                self._bind_layers(shader)
+                shader.uniform_sampler("material_table", self.material_table)
+                batch = self.resources.fullscreen_batch(shader)
+                for index, light in enumerate(lights):
+                    values = self._light_ubo(gpu, index, light)
+                    opaque = uploads["visibility"].get(("opaque", index))
+                    transparent = uploads["visibility"].get(("transparent", index))
+                    if opaque is not None or transparent is not None:
+                        values[120 + 15] = 1.0
+                    atlas = self.atlases.get(index)
+                    light_ubo = _ubo(gpu, values)  # referenced until drawn: a dropped UBO reads as zeros
+                    shader.uniform_block("light", light_ubo)
+                    shader.uniform_sampler("shadow_map", atlas.texture if atlas is not None else no_visibility)
+                    shader.uniform_sampler("opaque_visibility", opaque if opaque is not None else no_visibility)
+                    shader.uniform_sampler("transparent_visibility",
+                                           transparent if transparent is not None else no_visibility)
+                    batch.draw(shader)
+        finally:
+            gpu.state.blend_set("NONE")
+
+    def _composite(self, gpu, uploads) -> np.ndarray:
+        targets = self.targets
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(targets["combined"],))
+        flags = (float("opaque" in uploads["reflection"]), float("transparent" in uploads["reflection"]),
+                 float(uploads["refraction"] is not None))
+        camera_ubo = self._camera_ubo(gpu, flags)
+        empty = self.resources.placeholder(0.0)
+
+        def bind(shader):
+            shader.uniform_block("camera", camera_ubo)
+            self._bind_layers(shader)
+            shader.uniform_sampler("material_table", self.material_table)
+            shader.uniform_sampler("opaque_light", targets["opaque_light"])
+            shader.uniform_sampler("transparent_light", targets["transparent_light"])
+            shader.uniform_sampler("opaque_reflection", uploads["reflection"].get("opaque", empty))
+            shader.uniform_sampler("transparent_reflection", uploads["reflection"].get("transparent", empty))
+            shader.uniform_sampler("refraction", uploads["refraction"] or empty)
+
+        gpu.state.blend_set("NONE")
+        self._fullscreen(gpu, "composite", framebuffer, bind)
+        self.combined_texture = targets["combined"]
+        return self._read(gpu, framebuffer, 0, "FLOAT", 4)
+
+    # -- read-back ------------------------------------------------------------------
+    def _read(self, gpu, framebuffer, slot, kind, channels):
+        n = self.width * self.height * channels
+        buffer = gpu.types.Buffer(kind, n)
+        with framebuffer.bind():
+            framebuffer.read_color(0, 0, self.width, self.height, channels, slot, kind, data=buffer)
+        dtype = np.float32 if kind == "FLOAT" else np.uint32
+        shape = (self.height, self.width, channels) if channels > 1 else (self.height, self.width)
+        return np.asarray(buffer, dtype=dtype).reshape(shape).copy()
+
+    def _read_layer(self, gpu, framebuffer, first_slot) -> GBufferLayer:
+        position = self._read(gpu, framebuffer, first_slot, "FLOAT", 4)
+        normal = self._read(gpu, framebuffer, first_slot + 1, "FLOAT", 4)
+        element = self._read(gpu, framebuffer, first_slot + 2, "UINT", 1)
+        return decode_layer(position, normal, element)
 
 
-def decode_layer(position: np.ndarray, normal: np.ndarray, ids: np.ndarray) -> GBufferLayer:
-    """Turn the raw read-back targets into a ``GBufferLayer`` (whole-array numpy).
-    Cleared pixels read as zeros in every target, so no masking is needed."""
-    covered = position[..., 3] > 0.5  # the shader writes w = 1; cleared pixels are 0
-    element = (ids[..., 0] & 0x7FFF).astype(np.int32) - 1
-    material = ((ids[..., 0] >> 15) & 0xFFFF).astype(np.int32)
-    material[~covered] = -1
-    bits = np.ascontiguousarray(ids[..., 1], dtype="<u4")
-    packed = bits.view(np.uint8).reshape(bits.shape + (4,))  # little-endian: r, g, b, metallic
-    albedo = packed[..., :3].astype(np.float32) * (1.0 / 255.0)
-    albedo *= albedo
+def decode_layer(position: np.ndarray, normal: np.ndarray, element: np.ndarray, albedo=None) -> GBufferLayer:
+    """The raw read-back targets as a ``GBufferLayer`` (whole-array numpy).  Cleared pixels
+    read as zeros in every target."""
+    material = np.rint(position[..., 3]).astype(np.int64) - 1
+    covered = material >= 0
     return GBufferLayer(
         covered=covered,
         position=np.ascontiguousarray(position[..., :3]),
         normal=np.ascontiguousarray(normal[..., :3]),
         roughness=np.ascontiguousarray(normal[..., 3]),
-        albedo=albedo,
-        metallic=packed[..., 3].astype(np.float32) * (1.0 / 255.0),
-        material=material,
-        element=element,
+        albedo=None if albedo is None else np.ascontiguousarray(albedo[..., :3]),
+        metallic=None if albedo is None else np.ascontiguousarray(albedo[..., 3]),
+        material=material.astype(np.int32),
+        element=element.astype(np.int64) - 1,
     )

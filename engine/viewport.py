@@ -2,11 +2,12 @@
 
 Rendered shading (``view_update`` / ``view_draw`` of the engine): the frame is
 rendered through the same stages as a final frame (``extract`` snapshot ->
-``raster`` G-buffer and shadow maps -> ``FrameRenderer`` selection, trace and
+``raster`` GPU frame -> ``FrameRenderer`` selection, trace, GLSL lighting and
 composite), seen from the viewport's view and projection matrices at a reduced
-resolution, then drawn as a texture through Blender's display transform.  It is
-rendered again only when the depsgraph or the view changed, so orbiting a
-static scene redraws a cached texture between re-renders.
+resolution, then the frame's GPU texture is drawn through Blender's display
+transform.  Every cached GPU resource (shaders, meshes, shadow maps) is reused, so
+orbiting a static scene costs a G-buffer and lighting pass; the image is rendered
+again only when the depsgraph or the view changed.
 
 The overlay (any shading mode): each element of the last final frame
 (``final.LAST_FRAME['rows']``) gets a coloured box by its decision -
@@ -26,7 +27,7 @@ import numpy as np
 
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.scene import Camera
-from . import extract, final
+from . import extract, final, gpu_resources
 
 # What each decision looks like in the overlay (linear RGBA).  Elements that are
 # not candidates get no box: the overlay shows what the designer tagged.
@@ -216,16 +217,18 @@ def view_camera(view_matrix, window_matrix, width, height, ortho=False, clip_sta
 def render_view(depsgraph, camera: Camera, renderer: FrameRenderer):
     """Render one PHRT frame of ``depsgraph`` seen by ``camera``; needs a GPU context
     (``view_draw``, or ``render()`` of an engine with ``bl_use_gpu_context``).
-    Returns the ``FrameResult`` (``passes.combined`` is (h, w, 4), bottom row first)."""
+    Returns the ``FrameResult`` (``passes.combined`` is (h, w, 4), bottom row first); its
+    ``gpu_image`` is the GPU texture holding the same image (valid until the next frame)."""
     start = time.perf_counter()
     stand_in = _ViewCamera(camera.view_matrix, camera.projection, camera.ortho, camera.clip_start, camera.clip_end)
     snapshot = extract.extract(depsgraph, camera_override=stand_in)
     snapshot = dataclasses.replace(snapshot, camera=camera)
     extract_ms = (time.perf_counter() - start) * 1000.0
-    gbuffer, shadow_maps, raster_ms, raster_setup_ms, _ = final.rasterize(snapshot)
-    result = renderer.render(snapshot, gbuffer, shadow_maps, raster_ms, raster_setup_ms=raster_setup_ms)
+    gpu_frame = final.rasterize(snapshot)
+    result = renderer.render(snapshot, gpu_frame)
     result.stats["extract_ms"] = extract_ms
     result.problems = list(snapshot.problems)
+    result.gpu_image = gpu_frame.combined_texture
     return result
 
 
@@ -240,7 +243,9 @@ class ViewportRender:
         self.renderer = FrameRenderer()
         self.stale = True
         self.view_key = None
-        self.pixels = None  # the last frame (numpy): GPU objects never outlive a draw call
+        self.pixels = None  # the last frame (numpy), if its GPU texture was replaced
+        self.image = None  # the last frame's GPU texture
+        self.image_frame = None  # RESOURCES.frames_drawn when it was drawn (None: our own copy)
         self.size = None
 
     def update(self, depsgraph):
@@ -259,7 +264,7 @@ class ViewportRender:
         key = (view_matrix.round(6).tobytes(), window_matrix.round(6).tobytes(), width, height)
         if self.stale or key != self.view_key:
             # Whatever happens, this view is done: a failing scene is not re-rendered on every redraw.
-            self.stale, self.view_key, self.pixels = False, key, None
+            self.stale, self.view_key, self.image, self.pixels = False, key, None, None
             camera = view_camera(view_matrix, window_matrix, width, height, ortho=not region_3d.is_perspective,
                                  clip_start=getattr(space, "clip_start", 0.01),
                                  clip_end=getattr(space, "clip_end", 1000.0))
@@ -268,16 +273,24 @@ class ViewportRender:
                 result = render_view(depsgraph, camera, self.renderer)
             finally:
                 gpu.state.viewport_set(*viewport)
+            # The frame's own GPU texture is drawn (textures are shared between contexts); the
+            # numpy copy stands in if another render at another resolution replaced that texture.
+            self.image = result.gpu_image
+            self.image_frame = gpu_resources.RESOURCES.frames_drawn
             self.pixels = np.ascontiguousarray(np.nan_to_num(result.passes.combined), dtype=np.float32).ravel()
             self.size = (width, height)
             engine.update_stats("PHRT", f"{result.stats['total_ms']:.0f} ms, "
                                         f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
         if self.pixels is None:
             return
-        # Uploaded for this draw only (a few ms): a texture kept on the engine would be freed
-        # by the garbage collector outside any GPU context.
-        buffer = gpu.types.Buffer("FLOAT", self.pixels.size, self.pixels)
-        texture = gpu.types.GPUTexture(self.size, format="RGBA16F", data=buffer)
+        texture = self.image
+        if texture is not None and self.image_frame is not None and \
+                self.image_frame != gpu_resources.RESOURCES.frames_drawn:
+            texture = None  # another frame was drawn into the targets since
+        if texture is None:
+            buffer = gpu.types.Buffer("FLOAT", self.pixels.size, self.pixels)
+            texture = self.image = gpu.types.GPUTexture(self.size, format="RGBA16F", data=buffer)
+            self.image_frame = None  # our own copy: valid until the next render
         gpu.state.blend_set("ALPHA_PREMULT")
         engine.bind_display_space_shader(depsgraph.scene)
         try:
@@ -285,4 +298,3 @@ class ViewportRender:
         finally:
             engine.unbind_display_space_shader()
             gpu.state.blend_set("NONE")
-            del texture, buffer

@@ -1,43 +1,79 @@
-"""One PHRT frame after the G-buffer: selection, ray tracing, compositing.
+"""One PHRT frame after the G-buffer: selection, ray tracing, then lighting and composite.
 
 ``FrameRenderer`` lives for a whole replay (one per engine instance or CLI run):
 it keeps the Embree scenes, the cost model and last frame's selection (the
-paper's S).  ``render()`` takes a snapshot, its G-buffer and the shadow maps
-and returns every pass plus the statistics and selection rows of the logs.
+paper's S).  ``render()`` takes a snapshot and a ``RasterFrame`` whose G-buffer
+is already drawn, and returns every pass plus the statistics and selection rows
+of the logs.
 
-Stages (CONTRACT.md section 4 timings):
-- raster_ms   (measured by the caller: GPU G-buffer + read-back + shadow maps) plus
-              the shadow-map lookups done here;
-- select_ms   element statistics from the element-id image and the heuristic;
-- trace_ms    Embree upload of changed geometry, shadow / reflection / refraction rays;
-- composite_ms deferred lighting with the final visibility and blending of the
-              traced and raster terms into the passes.
+A ``RasterFrame`` is the raster half: ``engine/raster.GPUFrame`` (GLSL on Blender's
+``gpu`` module) in the engine, ``lighting.ReferenceRaster`` (numpy, the same
+equations) in core tests.  It provides the front element ids, view depth and
+normal (read back after the G-buffer), the full layers on request (only when
+rays will be traced), and ``shade(traced)``: deferred lighting and composite,
+with the tracer's results where it replaced the raster ones.
+
+Stages (the columns of frames.csv, docs/formats.md):
+- raster_ms     G-buffer, its read-back, shadow maps (re-rendered only after a change),
+                and in HYBRID/RAYTRACE the layers read back for rays;
+- select_ms     element statistics from the element-id image and the heuristic;
+- trace_ms      Embree upload of changed geometry, shadow / reflection / refraction rays,
+                shading of the ray hits, and the upload of their results to the GPU;
+- composite_ms  the deferred lighting passes, composite and read-back of the image.
 
 Pay only for what is used: RASTER never touches the tracer (``embreex`` is not
-even imported), no lights means no shadow work, and no selected element means
-no Embree work at all.
+even imported) nor reads the layers back, no lights means no shadow work, and no
+selected element means no Embree work at all.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from . import heuristic, shading
 from .cost_model import CostModel, FrameStats
 from .gbuffer import GBuffer, element_pixel_stats
-from .scene import SceneSnapshot, transform_points
-from .shadowmap import shadow_visibility
+from .scene import SceneSnapshot
+from .shadow_region import ElementBounds, ShadowRegionIndex
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
 FOOTPRINT_STEP = 8
 
 
+class RasterFrame(Protocol):
+    width: int
+    height: int
+    raster_ms: float  # G-buffer drawn and read back, shadow maps included
+    setup_ms: float  # the one-time part of raster_ms (compiles, uploads, new shadow maps)
+    front_element: np.ndarray  # (h, w) int, -1 where no element
+    view_depth: np.ndarray  # (h, w) float32 distance along the view axis; inf = background
+    front_normal: np.ndarray  # (h, w, 3) float32
+    stats: dict
+
+    def gbuffer(self) -> GBuffer: ...
+
+    def shade(self, traced: "TracedTerms | None") -> np.ndarray: ...
+
+
+@dataclass
+class TracedTerms:
+    """What the trace stage computed, by flat pixel index (row 0 at the bottom)."""
+
+    # (layer, light index) -> (pixels, lit fraction): replaces the shadow map there
+    shadow_visibility: dict = field(default_factory=dict)
+    # layer -> (pixels, (n, 3) radiance reflected towards the viewer, blended by roughness)
+    reflection: dict = field(default_factory=dict)
+    # (pixels, (n, 3) radiance arriving through the transparent layer), or None
+    refraction: tuple | None = None
+
+
 @dataclass
 class FramePasses:
-    combined: np.ndarray  # (h,w,4) float32, linear, alpha 1 where covered or world
-    depth: np.ndarray  # (h,w) float32 view-axis distance; large where background
+    combined: np.ndarray  # (h,w,4) float32, linear, alpha 1
+    depth: np.ndarray  # (h,w) float32 view-axis distance; 1e10 where background
     normal: np.ndarray  # (h,w,3) float32
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
@@ -52,30 +88,56 @@ class FrameResult:
     problems: list = field(default_factory=list)
 
 
-# Below this many pixels per task, threads cost more than they save.
-PARALLEL_MIN_PIXELS = 20000
-_POOL = None
-
-
-def _map(function, items, pixels):
-    """``[function(item) for item in items]``, on a thread pool when the work is large enough
-    (numpy releases the GIL in its whole-array loops, so lights shade in parallel)."""
-    global _POOL
-    if len(items) < 2 or pixels < PARALLEL_MIN_PIXELS:
-        return [function(item) for item in items]
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-        from .tracer import worker_count
-        _POOL = ThreadPoolExecutor(worker_count(), thread_name_prefix="phrt-shade")
-    return list(_POOL.map(function, items))
-
-
 def _timer():
     return time.perf_counter()
 
 
 def _ms(start):
     return (time.perf_counter() - start) * 1000.0
+
+
+class LayerPixels:
+    """The covered pixels of one read-back G-buffer layer; per-pixel terms are computed only
+    for the subsets that get rays."""
+
+    def __init__(self, layer, origin, camera, materials: shading.MaterialTable):
+        self.flat = np.flatnonzero(layer.covered.ravel())
+        self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
+        self.origin = np.asarray(origin, np.float64)
+        self.element = layer.element.ravel()[self.flat]
+        self.material = np.clip(layer.material.ravel()[self.flat], 0, len(materials.ior) - 1)
+        self.roughness = layer.roughness.ravel()[self.flat]
+        self._normal = layer.normal.reshape(-1, 3)[self.flat]
+        self.camera = camera
+        self.materials = materials
+
+    def __len__(self):
+        return len(self.flat)
+
+    def world(self, index=slice(None)) -> np.ndarray:
+        return self.position[index].astype(np.float64) + self.origin
+
+    def view_directions(self, index=slice(None)) -> np.ndarray:
+        """Unit directions from the camera (perspective) or the camera axis (orthographic)."""
+        position = self.position[index]
+        if self.camera.ortho:
+            return np.broadcast_to(self.camera.forward.astype(np.float32), position.shape).copy()
+        return shading.normalize(position)
+
+    def normals(self, index=slice(None), view_directions=None) -> np.ndarray:
+        """Unit shading normals facing the viewer (flipped where interpolation turned them away)."""
+        normal = shading.normalize(self._normal[index])
+        if view_directions is None:
+            view_directions = self.view_directions(index)
+        back = shading.dot(normal, view_directions) > 0
+        normal[back] *= -1.0
+        return normal
+
+    def camera_distance(self, index=slice(None)) -> np.ndarray:
+        """Distance from the camera: the size of the points' float32 error, which secondary-ray
+        offsets must exceed (telephoto views)."""
+        position = self.position[index]
+        return np.sqrt(shading.dot(position, position))
 
 
 class FrameRenderer:
@@ -87,6 +149,7 @@ class FrameRenderer:
         self.previous_selection = {}
         self.trace_scene = None
         self.frames_rendered = 0
+        self.element_bounds = ElementBounds()
 
     def close(self):
         if self.trace_scene is not None:
@@ -94,38 +157,37 @@ class FrameRenderer:
             self.trace_scene = None
 
     # ------------------------------------------------------------------
-    def render(self, snapshot: SceneSnapshot, gbuffer: GBuffer, shadow_maps: dict, raster_ms: float,
-               raster_setup_ms: float = 0.0) -> FrameResult:
-        """``raster_setup_ms``: the one-time part of ``raster_ms`` (shader compiles, shadow maps drawn
-        anew): reported, but not taught to the cost model as a per-frame cost."""
+    def render(self, snapshot: SceneSnapshot, raster: RasterFrame) -> FrameResult:
         settings = snapshot.settings
         mode = settings.mode.upper()
-        height, width = gbuffer.height, gbuffer.width
         materials = shading.MaterialTable(snapshot.materials)
         if self.cost_model is None:
             self.cost_model = CostModel()
+        n_elements = len(snapshot.elements)
+        candidate = np.array([e.candidate and e.priority > 0 for e in snapshot.elements], bool)
 
-        # -- raster shadows (shadow-map lookups) ------------------------------
+        # -- element statistics; the layers are read back only if rays may be traced ----
         start = _timer()
-        layers = self._layer_samples(gbuffer, snapshot, materials)
-        # Per layer and light: the pixels the light reaches (facing it, non-negligible irradiance),
-        # its direction and irradiance there, and their visibility (shadow maps now, rays later).
-        # Lights are independent and numpy releases the GIL on whole arrays: one task per light.
-        visibility = {}
-        for layer_name, samples in layers.items():
-            visibility[layer_name] = _map(lambda item: light_terms(item[1], samples, shadow_maps.get(item[0])),
-                                          list(enumerate(snapshot.lights)), len(samples["world"]))
-        raster_ms = raster_ms + _ms(start)
+        front = raster.front_element
+        area_px, centre_ndc, distance = element_pixel_stats(front, n_elements, raster.view_depth)
+        select_ms = _ms(start)
+        layers = None
+        readback_ms = 0.0
+        may_trace = mode != "RASTER" and bool(np.any(candidate & (area_px > 0)))
+        if may_trace:
+            start = _timer()
+            gbuffer = raster.gbuffer()
+            layers = {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
+                      "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
+            readback_ms = _ms(start)
+        raster_ms = raster.raster_ms + readback_ms
 
         # -- selection --------------------------------------------------------
         start = _timer()
-        n_elements = len(snapshot.elements)
-        front = gbuffer.front_element()
-        area_px, centre_ndc, distance = element_pixel_stats(front, n_elements, gbuffer.view_depth)
         shadow_lights = [light for light in snapshot.lights if light.cast_shadows]
-        element_bounds = _element_bounds(snapshot)
-        footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px, mode) \
-            if shadow_lights and mode != "RASTER" else np.zeros(n_elements)
+        element_bounds = self.element_bounds(snapshot)
+        footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px) \
+            if shadow_lights and layers is not None else np.zeros(n_elements)
         frame_elements = heuristic.FrameElements(
             names=[e.name for e in snapshot.elements],
             candidate=np.array([e.candidate for e in snapshot.elements], bool),
@@ -135,8 +197,8 @@ class FrameRenderer:
             shadows=np.array([e.shadows for e in snapshot.elements], bool),
             reflections=np.array([e.reflections for e in snapshot.elements], bool),
             refractions=np.array([e.refractions for e in snapshot.elements], bool),
-            rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint, settings.max_bounces),
-            frame_px=width * height,
+            rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint),
+            frame_px=raster.width * raster.height,
             near_clip=snapshot.camera.clip_start,
         )
         selection = heuristic.select(
@@ -146,29 +208,32 @@ class FrameRenderer:
                                         cost_mode=settings.cost_mode),
             self.cost_model, frame=snapshot.frame)
         selected = np.asarray(selection.selected, bool)
-        select_ms = _ms(start)
+        select_ms += _ms(start)
 
         # -- ray tracing ------------------------------------------------------
         start = _timer()
         counters = _Counters()
-        reflection_radiance = {}
-        refraction_radiance = {}
         element_rays = np.zeros(n_elements)
-        if np.any(selected):
-            self._trace(snapshot, gbuffer, layers, materials, selected, element_bounds, visibility,
-                        reflection_radiance, refraction_radiance, counters, element_rays)
+        traced = None
+        if np.any(selected) and layers is not None:
+            traced = self._trace(snapshot, layers, materials, selected, element_bounds, counters, element_rays)
         trace_ms = _ms(start)
 
-        # -- compositing --------------------------------------------------------
+        # -- lighting and composite (GPU) -----------------------------------------
         start = _timer()
-        passes = self._composite(snapshot, gbuffer, layers, materials, visibility, reflection_radiance,
-                                 refraction_radiance, selected)
+        combined = raster.shade(traced)
         composite_ms = _ms(start)
+        # Uploading the traced results is part of the tracing's cost, which scales with the selection.
+        traced_upload_ms = float(raster.stats.get("traced_upload_ms", 0.0)) if traced is not None else 0.0
+        trace_ms += traced_upload_ms
+        composite_ms = max(composite_ms - traced_upload_ms, 0.0)
+        passes = self._passes(snapshot, raster, combined, selected, candidate)
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
-        # One-time work (Embree builds, shader compiles, new shadow maps) is not a per-frame cost.
+        setup_ms = raster.setup_ms + counters.upload_ms
+        # One-time work (Embree builds, shader compiles, uploads, new shadow maps) is not a per-frame cost.
         self.cost_model.observe(FrameStats(
-            raster_ms=max(raster_ms - raster_setup_ms, 0.0), select_ms=select_ms, composite_ms=composite_ms,
+            raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms, composite_ms=composite_ms,
             trace_ms=max(trace_ms - counters.upload_ms, 0.0) if np.any(selected) else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},
@@ -186,7 +251,9 @@ class FrameRenderer:
             "n_selected": int(np.sum(selected)), "rays": counters.rays,
             "shadow_rays": counters.shadow_rays, "reflection_rays": counters.reflection_rays,
             "refraction_rays": counters.refraction_rays, "upload_ms": counters.upload_ms,
-            "setup_ms": raster_setup_ms + counters.upload_ms,
+            "setup_ms": setup_ms, "readback_ms": readback_ms,
+            "gbuffer_ms": float(raster.stats.get("gbuffer_ms", raster.raster_ms)),
+            "lighting_ms": composite_ms,
             "time_left_ms": float(selection.time_left_ms), "triangles": snapshot.n_triangles,
         }
         return FrameResult(passes=passes, stats=stats, selection=selection,
@@ -194,48 +261,34 @@ class FrameRenderer:
 
     # ------------------------------------------------------------------
     @staticmethod
-    def _layer_samples(gbuffer, snapshot, materials):
-        """Per covered pixel of each layer: flat index, world point (float64, for rays),
-        and float32 surface samples relative to the camera (for deferred lighting)."""
-        camera = snapshot.camera
-        layers = {}
-        for name, layer in (("opaque", gbuffer.opaque), ("transparent", gbuffer.transparent)):
-            flat = np.flatnonzero(layer.covered.ravel())
-            position = layer.position.reshape(-1, 3)[flat]  # float32, camera-relative
-            world = position.astype(np.float64) + gbuffer.origin
-            # Positions are relative to the camera: the view ray is the position itself
-            # (perspective) or the camera axis (orthographic).
-            if camera.ortho:
-                view_dirs = np.broadcast_to(camera.forward.astype(np.float32), position.shape).copy()
-            else:
-                view_dirs = shading.normalize(position)
-            material = np.clip(layer.material.ravel()[flat], 0, len(materials.ior) - 1)
-            normal = shading.normalize(layer.normal.reshape(-1, 3)[flat])
-            # A normal facing away from the viewer (interpolation at silhouettes) is flipped.
-            back = shading.dot(normal, view_dirs) > 0
-            normal[back] *= -1.0
-            surface = shading.SurfaceSamples(
-                position=position, normal=normal, view=-view_dirs,
-                albedo=layer.albedo.reshape(-1, 3)[flat],
-                metallic=layer.metallic.ravel()[flat],
-                roughness=layer.roughness.ravel()[flat],
-                transmission=materials.transmission[material].astype(np.float32),
-                ior=materials.ior[material].astype(np.float32),
-                emission=materials.emission[material].astype(np.float32))
-            layers[name] = {"flat": flat, "world": world, "surface": surface, "material": material,
-                            "element": layer.element.ravel()[flat], "directions": view_dirs,
-                            "origin": gbuffer.origin}
-        return layers
+    def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
+        front = np.asarray(raster.front_element)
+        n = len(snapshot.elements)
+        # Ids beyond the element list (a corrupt read-back) are no element.
+        front = np.where((front >= 0) & (front < n), front, -1)
+        candidate_flags = np.r_[candidate, False]
+        selected_flags = np.r_[np.asarray(selected, bool), False]
+        depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, 1e10).astype(np.float32)
+        combined = np.ascontiguousarray(combined, dtype=np.float32)
+        combined[..., :3] = shading.finite(combined[..., :3])
+        combined[..., 3] = 1.0
+        return FramePasses(
+            combined=combined,
+            depth=depth,
+            normal=np.nan_to_num(raster.front_normal).astype(np.float32),
+            selected=selected_flags[front].astype(np.float32),
+            candidate=candidate_flags[front].astype(np.float32),
+        )
 
-    def _shadow_footprints(self, layers, snapshot, element_bounds, area_px, mode):
+    def _shadow_footprints(self, layers, snapshot, element_bounds, area_px):
         """Estimated shadow-ray count per element (pixels it can shadow, summed over lights),
         from a 1/FOOTPRINT_STEP^2 sub-sample of the opaque layer."""
         n = len(snapshot.elements)
         footprint = np.zeros(n)
         samples = layers["opaque"]
-        if len(samples["world"]) == 0:
+        if len(samples) == 0:
             return footprint
-        points = samples["world"][::FOOTPRINT_STEP * FOOTPRINT_STEP]
+        points = samples.world(slice(None, None, FOOTPRINT_STEP * FOOTPRINT_STEP))
         scale = FOOTPRINT_STEP * FOOTPRINT_STEP
         casters = [index for index, element in enumerate(snapshot.elements)
                    if element.candidate and element.shadows and area_px[index] > 0
@@ -249,11 +302,9 @@ class FrameRenderer:
         return footprint
 
     # ------------------------------------------------------------------
-    def _trace(self, snapshot, gbuffer, layers, materials, selected, element_bounds, visibility,
-               reflection_radiance, refraction_radiance, counters, element_rays):
+    def _trace(self, snapshot, layers, materials, selected, element_bounds, counters, element_rays) -> TracedTerms:
         from .tracer import RadianceTracer, TraceScene, ray_epsilon, reflection_blend
 
-        start = _timer()
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
         transparent_materials = np.array([m.is_transparent for m in snapshot.materials], bool)
@@ -262,56 +313,66 @@ class FrameRenderer:
         textures = {index: m.texture for index, m in enumerate(snapshot.materials) if m.texture is not None}
         tracer = RadianceTracer(scene, snapshot, materials, textures)
         elements = snapshot.elements
+        traced = TracedTerms()
+        world = np.asarray(snapshot.world_color, dtype=np.float64)
 
-        # Shadows: for each light, the pixels a selected shadow caster can shadow get traced visibility.
+        # Shadows: for each light, the pixels a selected caster can shadow get traced visibility.
         start = _timer()
         casters = [i for i in np.flatnonzero(selected) if elements[i].shadows and element_bounds[i] is not None]
-        for layer_name, samples in layers.items():
-            if not casters or len(samples["world"]) == 0:
+        for layer_name, pixels in layers.items():
+            if not casters or len(pixels) == 0:
                 continue
-            surface = samples["surface"]
+            points_world = None
             for light_index, light in enumerate(snapshot.lights):
-                terms = visibility[layer_name][light_index]
-                if not light.cast_shadows or len(terms.active) == 0:
+                if not light.cast_shadows:
                     continue
-                index = ShadowRegionIndex(light, samples["world"][terms.active])
-                region = np.zeros(len(terms.active), bool)
+                if points_world is None:
+                    points_world = pixels.world()
+                index = ShadowRegionIndex(light, points_world)
+                region = np.zeros(len(pixels), bool)
                 for caster in casters:
                     caster_region = index.region(element_bounds[caster])
                     element_rays[caster] += np.count_nonzero(caster_region)
                     region |= caster_region
-                local = np.flatnonzero(region)
-                if len(local) == 0:
+                idx = np.flatnonzero(region)
+                if len(idx) == 0:
                     continue
-                idx = terms.active[local]
-                points_trace = scene.to_trace(samples["world"][idx])  # only the pixels that get rays
-                eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
-                _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                origins = points_trace + surface.normal[idx] * eps[:, None]
-                blocked = scene.occluded(origins, terms.direction[local], distance - 2 * eps)
-                terms.visibility[local] = np.where(blocked, 0.0, 1.0)
+                points_trace = scene.to_trace(points_world[idx])  # only the pixels that get rays
+                direction, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
+                normal = pixels.normals(idx)
+                facing = shading.dot(normal, direction) > 0  # the BRDF is zero elsewhere
+                idx, points_trace, direction, distance, normal = (
+                    idx[facing], points_trace[facing], direction[facing], distance[facing], normal[facing])
+                if len(idx) == 0:
+                    continue
+                eps = ray_epsilon(points_trace, scene.extent, pixels.camera_distance(idx))
+                origins = points_trace + normal * eps[:, None]
+                blocked = scene.occluded(origins, direction, distance - 2 * eps)
+                traced.shadow_visibility[(layer_name, light_index)] = (
+                    pixels.flat[idx], np.where(blocked, 0.0, 1.0).astype(np.float32))
                 counters.shadow_rays += len(idx)
         counters.shadow_ms = _ms(start)
 
         # Reflections on selected elements' pixels (mirror direction, blended by roughness).
         start = _timer()
         rays_before = tracer.rays + tracer.shadow_rays
-        for layer_name, samples in layers.items():
-            surface = samples["surface"]
-            element_of = samples["element"]
-            wanted = np.zeros(len(element_of), bool)
-            for index in np.flatnonzero(selected):
-                if elements[index].reflections:
-                    wanted |= element_of == index
-            wanted &= reflection_blend(surface.roughness) > 0
+        reflecting = np.array([bool(selected[i]) and elements[i].reflections for i in range(len(elements))] + [False])
+        for layer_name, pixels in layers.items():
+            if len(pixels) == 0:
+                continue
+            element_of = np.where(pixels.element >= 0, pixels.element, -1)
+            wanted = reflecting[element_of] & (reflection_blend(pixels.roughness) > 0)
             idx = np.flatnonzero(wanted)
             if len(idx) == 0:
                 continue
-            points_trace = scene.to_trace(samples["world"][idx])
-            eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
-            direction = shading.reflect(samples["directions"][idx], surface.normal[idx])
-            radiance = tracer.radiance(points_trace + surface.normal[idx] * eps[:, None], direction, 1)
-            reflection_radiance[layer_name] = (idx, radiance)
+            points_trace = scene.to_trace(pixels.world(idx))
+            eps = ray_epsilon(points_trace, scene.extent, pixels.camera_distance(idx))
+            view_dirs = pixels.view_directions(idx)
+            normal = pixels.normals(idx, view_dirs)
+            direction = shading.reflect(view_dirs, normal)
+            radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
+            blend = reflection_blend(pixels.roughness[idx])[:, None]
+            traced.reflection[layer_name] = (pixels.flat[idx], blend * radiance + (1.0 - blend) * world)
             np.add.at(element_rays, element_of[idx], 1)
         counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.reflection_ms = _ms(start)
@@ -319,88 +380,26 @@ class FrameRenderer:
         # Refractions through selected transparent elements (transparent layer only).
         start = _timer()
         rays_before = tracer.rays + tracer.shadow_rays
-        samples = layers["transparent"]
-        if len(samples["world"]):
-            surface = samples["surface"]
-            element_of = samples["element"]
-            wanted = np.zeros(len(element_of), bool)
-            for index in np.flatnonzero(selected):
-                if elements[index].refractions:
-                    wanted |= element_of == index
-            wanted &= surface.transmission > 1e-3
+        pixels = layers["transparent"]
+        if len(pixels):
+            refracting = np.array([bool(selected[i]) and elements[i].refractions
+                                   for i in range(len(elements))] + [False])
+            element_of = np.where(pixels.element >= 0, pixels.element, -1)
+            wanted = refracting[element_of] & (materials.transmission[pixels.material] > 1e-3)
             idx = np.flatnonzero(wanted)
             if len(idx):
-                points_trace = scene.to_trace(samples["world"][idx])
-                eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
-                direction, _ = shading.refract(samples["directions"][idx], surface.normal[idx], 1.0 / surface.ior[idx])
-                radiance = tracer.radiance(points_trace - surface.normal[idx] * eps[:, None], direction, 1)
-                refraction_radiance["transparent"] = (idx, radiance)
+                points_trace = scene.to_trace(pixels.world(idx))
+                eps = ray_epsilon(points_trace, scene.extent, pixels.camera_distance(idx))
+                view_dirs = pixels.view_directions(idx)
+                normal = pixels.normals(idx, view_dirs)
+                ior = materials.ior[pixels.material[idx]]
+                direction, _ = shading.refract(view_dirs, normal, 1.0 / ior)
+                radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
+                traced.refraction = (pixels.flat[idx], radiance)
                 np.add.at(element_rays, element_of[idx], 1)
         counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.refraction_ms = _ms(start)
-
-    # ------------------------------------------------------------------
-    def _composite(self, snapshot, gbuffer, layers, materials, visibility, reflection_radiance,
-                   refraction_radiance, selected):
-        height, width = gbuffer.height, gbuffer.width
-        world = np.asarray(snapshot.world_color, dtype=np.float64)
-        shaded = {}
-        for layer_name, samples in layers.items():
-            surface = samples["surface"]
-            color = surface.emission.copy()
-            def contribution(terms, surface=surface):
-                weight = terms.irradiance * terms.visibility[:, None]
-                return terms.active, shading.brdf_cosine(surface.subset(terms.active), terms.direction) * weight
-
-            lit_terms = [terms for terms in visibility[layer_name] if len(terms.active)]
-            for lit, light_color in _map(contribution, lit_terms, len(surface)):
-                color[lit] += light_color
-            diffuse_ambient, fresnel = shading.ambient(surface, world)
-            color += diffuse_ambient
-            transmissive = surface.transmission * (1.0 - surface.metallic)
-            reflected = np.broadcast_to(world, color.shape).copy()
-            if layer_name in reflection_radiance:
-                from .tracer import reflection_blend
-                idx, radiance = reflection_radiance[layer_name]
-                blend = reflection_blend(surface.roughness[idx])[:, None]
-                reflected[idx] = blend * radiance + (1.0 - blend) * world
-            cos_v = np.clip(np.sum(surface.normal * surface.view, axis=1), 0.0, 1.0)
-            fresnel_t = shading.fresnel_dielectric(cos_v, surface.ior)
-            reflect_weight = fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
-            color += reflect_weight * reflected
-            shaded[layer_name] = (color, transmissive, fresnel_t)
-
-        image = np.broadcast_to(world, (height * width, 3)).copy()
-        opaque = layers["opaque"]
-        image[opaque["flat"]] = shaded["opaque"][0]
-        transparent = layers["transparent"]
-        if len(transparent["flat"]):
-            color, transmissive, fresnel_t = shaded["transparent"]
-            surface = transparent["surface"]
-            behind = image[transparent["flat"]].copy()  # raster: straight through, no bending
-            if "transparent" in refraction_radiance:
-                idx, radiance = refraction_radiance["transparent"]
-                behind[idx] = radiance
-            tint = surface.albedo
-            transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * tint * behind
-            alpha = materials.alpha[transparent["material"]][:, None]
-            surface_color = color + transmitted
-            image[transparent["flat"]] = alpha * surface_color + (1.0 - alpha) * behind
-        image = shading.finite(image).reshape(height, width, 3)
-
-        combined = np.ones((height, width, 4), np.float32)
-        combined[..., :3] = image
-        front = gbuffer.front_element()
-        candidate_flags = np.array([e.candidate for e in snapshot.elements] + [False], bool)
-        selected_flags = np.r_[np.asarray(selected, bool), False]
-        depth = np.where(np.isfinite(gbuffer.view_depth), gbuffer.view_depth, 1e10).astype(np.float32)
-        return FramePasses(
-            combined=combined,
-            depth=depth,
-            normal=np.nan_to_num(gbuffer.front_normal()).astype(np.float32),
-            selected=selected_flags[front].astype(np.float32),
-            candidate=candidate_flags[front].astype(np.float32),
-        )
+        return traced
 
 
 @dataclass
@@ -418,195 +417,7 @@ class _Counters:
         return self.shadow_rays + self.reflection_rays + self.refraction_rays
 
 
-def _camera_distance(samples, index=slice(None)):
-    """Distance from the camera of G-buffer points (their positions are camera-relative): the
-    size of their float32 error, which secondary-ray offsets must exceed (telephoto views)."""
-    position = samples["surface"].position[index]
-    return np.sqrt(shading.dot(position, position))
-
-
-# Pixels receiving less than this fraction of a light's strongest irradiance in the frame skip it.
-LIGHT_CUTOFF = 1e-4
-
-
-@dataclass
-class LightTerms:
-    """One light at the pixels of one G-buffer layer it reaches."""
-
-    active: np.ndarray  # indices of the pixels facing the light with non-negligible irradiance
-    direction: np.ndarray  # (n_active, 3) unit, towards the light
-    irradiance: np.ndarray  # (n_active, 3)
-    visibility: np.ndarray  # (n_active,) lit fraction: shadow map, replaced by rays where traced
-
-
-def light_terms(light, samples, shadow_maps) -> LightTerms:
-    """Direction, irradiance and raster (shadow-map) visibility of ``light`` where it matters."""
-    surface = samples["surface"]
-    if len(surface) == 0:
-        empty = np.zeros((0, 3))
-        return LightTerms(np.zeros(0, np.int64), empty, empty, np.zeros(0))
-    direction, _, irradiance = shading.light_incidence(light, surface.position, samples["origin"])
-    strength = irradiance.max(axis=1)
-    reached = (shading.dot(surface.normal, direction) > 0) & (strength > LIGHT_CUTOFF * max(strength.max(), 1e-30))
-    active = np.flatnonzero(reached)
-    direction = np.ascontiguousarray(direction[active])
-    irradiance = np.ascontiguousarray(irradiance[active])
-    if light.cast_shadows and shadow_maps and len(active):
-        visibility = shadow_visibility(shadow_maps, surface.position[active], surface.normal[active],
-                                       origin=samples["origin"])
-    else:
-        visibility = np.ones(len(active), np.float32)
-    return LightTerms(active, direction, irradiance, visibility)
-
-
-_LOCAL_BOUNDS = {}  # geometry key -> {element: (low, high)} in local space (static per replay)
-
-
-def _local_element_bounds(mesh):
-    cached = _LOCAL_BOUNDS.get(mesh.geometry_key)
-    if cached is None:
-        cached = {}
-        corners = mesh.positions[mesh.triangles]  # (T, 3, 3)
-        low = corners.min(axis=1)
-        high = corners.max(axis=1)
-        for element in np.unique(mesh.tri_element[mesh.tri_element >= 0]):
-            chosen = mesh.tri_element == element
-            cached[int(element)] = (low[chosen].min(axis=0).astype(np.float64),
-                                    high[chosen].max(axis=0).astype(np.float64))
-        if len(_LOCAL_BOUNDS) > 4096:
-            _LOCAL_BOUNDS.clear()
-        _LOCAL_BOUNDS[mesh.geometry_key] = cached
-    return cached
-
-
-def _element_bounds(snapshot):
-    """World-space (min, max) of each element (None when it has no triangles): the local
-    bounds (cached per geometry) with their 8 corners moved by the world matrix."""
-    bounds = [None] * len(snapshot.elements)
-    signs = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
-    for mesh in snapshot.meshes:
-        if mesh.n_triangles == 0:
-            continue
-        for element, (low, high) in _local_element_bounds(mesh).items():
-            corners = transform_points(mesh.matrix_world, low + signs * (high - low))
-            world_low, world_high = corners.min(axis=0), corners.max(axis=0)
-            if bounds[element] is None:
-                bounds[element] = (world_low, world_high)
-            else:
-                bounds[element] = (np.minimum(bounds[element][0], world_low),
-                                   np.maximum(bounds[element][1], world_high))
-    return bounds
-
-
-def shadow_region(light, bounds, points) -> np.ndarray:
-    """Points (world, (N,3)) whose segment to ``light`` may pass through the box ``bounds``:
-    the pixels an element can shadow.  Conservative (a bounding sphere or a light-space box)."""
-    low, high = bounds
-    centre = (low + high) / 2.0
-    radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
-    if light.kind == "SUN":
-        direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
-        relative = points - centre
-        along = relative @ direction  # > 0: downstream of the caster
-        lateral = relative - along[:, None] * direction
-        return (along > -radius) & (np.einsum("ij,ij->i", lateral, lateral) <= radius * radius)
-    light_position = np.asarray(light.position, dtype=np.float64)
-    to_centre = centre - light_position
-    centre_distance = float(np.linalg.norm(to_centre))
-    if centre_distance <= radius:
-        return np.ones(len(points), bool)  # the light is inside the caster's bounds
-    axis = to_centre / centre_distance
-    to_point = points - light_position
-    point_distance = np.linalg.norm(to_point, axis=1)
-    cos_point = (to_point @ axis) / np.maximum(point_distance, 1e-30)
-    cos_cone = np.sqrt(max(1.0 - (radius / centre_distance) ** 2, 0.0))
-    return (cos_point >= cos_cone) & (point_distance > centre_distance - radius)
-
-
-class ShadowRegionIndex:
-    """``shadow_region`` for many casters and one light over the same points.
-
-    The points' light-space coordinates are computed once per light: for the sun, two
-    coordinates across the light and one along it; for local lights, the unit direction
-    from the light and the distance.  A caster is then a few float32 operations per point.
-    Once a light has ``SORT_AFTER_QUERIES`` casters, the points are also sorted by one
-    coordinate, and each further caster tests only the window of points that can be in
-    its cylinder or cone (a searchsorted range).  Same answer as ``shadow_region``."""
-
-    SORT_AFTER_QUERIES = 6
-
-    def __init__(self, light, points):
-        self.light = light
-        points = np.asarray(points, dtype=np.float64)
-        self.n = len(points)
-        self.queries = 0
-        self.order = None
-        if light.kind == "SUN":
-            direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
-            helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-            across = shading.normalize(np.cross(direction, helper))
-            self.basis = np.stack([across, np.cross(direction, across), direction])
-            self.coords = (points @ self.basis.T).astype(np.float32)  # (u, v) across, w along
-        else:
-            self.origin = np.asarray(light.position, dtype=np.float64)
-            to_point = points - self.origin
-            distance = np.sqrt(shading.dot(to_point, to_point))
-            self.coords = np.concatenate([to_point / np.maximum(distance, 1e-30)[:, None], distance[:, None]],
-                                         axis=1).astype(np.float32)  # unit direction, distance
-
-    def _test(self, coords, bounds):
-        low, high = bounds
-        centre = (low + high) / 2.0
-        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
-        if self.light.kind == "SUN":
-            cu, cv, cw = self.basis @ centre
-            du = coords[:, 0] - np.float32(cu)
-            dv = coords[:, 1] - np.float32(cv)
-            return (du * du + dv * dv <= np.float32(radius * radius)) & (coords[:, 2] > np.float32(cw - radius))
-        to_centre = centre - self.origin
-        distance = float(np.linalg.norm(to_centre))
-        if distance <= radius:
-            return np.ones(len(coords), bool)  # the light is inside the caster's bounds
-        axis = (to_centre / distance).astype(np.float32)
-        cos_cone = np.float32(np.sqrt(max(1.0 - (radius / distance) ** 2, 0.0)))
-        return (coords[:, :3] @ axis >= cos_cone) & (coords[:, 3] > np.float32(distance - radius))
-
-    def _window(self, bounds):
-        """The index range of sorted points that may pass ``_test`` (a superset)."""
-        low, high = bounds
-        centre = (low + high) / 2.0
-        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
-        if self.light.kind == "SUN":
-            key = float(self.basis[0] @ centre)
-            reach = radius
-        else:
-            to_centre = centre - self.origin
-            distance = float(np.linalg.norm(to_centre))
-            if distance <= radius:
-                return 0, self.n
-            # Unit directions within the cone's half angle t of the axis a satisfy |d_x - a_x| <= t.
-            key = to_centre[0] / distance
-            reach = float(np.arcsin(min(radius / distance, 1.0)))
-        margin = 1e-5 * (abs(key) + reach) + 1e-6  # float32 keys
-        start = np.searchsorted(self.sorted_key, key - reach - margin, side="left")
-        stop = np.searchsorted(self.sorted_key, key + reach + margin, side="right")
-        return start, stop
-
-    def region(self, bounds) -> np.ndarray:
-        self.queries += 1
-        if self.queries <= self.SORT_AFTER_QUERIES:
-            return self._test(self.coords, bounds)
-        if self.order is None:
-            self.order = np.argsort(self.coords[:, 0], kind="stable")
-            self.sorted_key = self.coords[self.order, 0]
-            self.sorted_coords = self.coords[self.order]
-        start, stop = self._window(bounds)
-        result = np.zeros(self.n, bool)
-        result[self.order[start:stop]] = self._test(self.sorted_coords[start:stop], bounds)
-        return result
-
-
-def _rays_per_pixel(snapshot, area_px, footprint, max_bounces):
+def _rays_per_pixel(snapshot, area_px, footprint):
     """Rays one pixel of each element costs with its effects (input of the measured cost model)."""
     rays = np.zeros(len(snapshot.elements))
     safe_area = np.maximum(area_px, 1)

@@ -10,7 +10,9 @@ position otherwise) and its matrices act on positions relative to it, so huge
 world coordinates do not cost float32 precision on the GPU.
 
 Lookup: 2x2 percentage-closer filtering with a normal offset of 1.5 texels and
-a comparison in linear light-space depth.  The result is the raster shadow the
+a comparison in linear light-space depth.  The GPU does the same lookup in GLSL
+(``engine/shaders.py``); this numpy version is the reference it is tested against
+(``phrt_addon/lighting.py``).  The result is the raster shadow the
 ray tracer replaces for selected casters (its softness and blockiness are what
 ray traced shadows improve on).
 """
@@ -42,12 +44,22 @@ class LightView:
 
 @dataclass
 class ShadowMap:
+    """One view's map as numpy: ``linear`` is the light-space depth along the view axis per
+    texel (what the GPU stores, R32F), flat, row 0 at the bottom."""
+
     view: LightView
-    depth: np.ndarray  # (size, size) float32 window depth in [0, 1], row 0 at the bottom
+    depth: np.ndarray | None = None  # (size, size) float32 window depth in [0, 1] (hardware depth)
+    linear: np.ndarray | None = None
 
     def __post_init__(self):
-        # Linear light-space depth, computed once: maps are cached across frames.
-        self.linear = _linear_depth(self.view, self.depth.astype(np.float64)).astype(np.float32).ravel()
+        if self.linear is None:
+            self.linear = _linear_depth(self.view, self.depth.astype(np.float64)).astype(np.float32).ravel()
+        else:
+            self.linear = np.ascontiguousarray(self.linear, dtype=np.float32).ravel()
+
+    @classmethod
+    def from_linear(cls, view: LightView, linear: np.ndarray) -> "ShadowMap":
+        return cls(view=view, linear=linear)
 
 
 def look_at(forward, up_hint=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -132,17 +144,22 @@ def _linear_depth(view: LightView, window_depth):
     return 2.0 * n * f / np.maximum(f + n - z_ndc * (f - n), 1e-300)
 
 
-def _lookup_one(shadow_map: ShadowMap, relative, normals):
-    """Lit fraction in [0,1] for points (relative to the view's origin) seen by one view;
-    NaN where outside this view.  Works in the points' precision (float32 or float64)."""
+def _texel_size(view: LightView, relative):
+    """World size of a texel at each point (relative to the view origin): the normal offset
+    and the depth bias are multiples of it."""
+    if view.ortho:
+        return np.full(len(relative), view.texel_angle, relative.dtype)
+    axis_depth = -(relative @ view.view[2, :3].astype(relative.dtype))
+    return (view.texel_angle * np.maximum(axis_depth, view.near)).astype(relative.dtype)
+
+
+def _lookup_one(shadow_map: ShadowMap, offset_points, texel):
+    """Lit fraction in [0,1] for normal-offset points (relative to the view's origin) seen by
+    one view; NaN where outside this view.  Works in the points' precision."""
     view = shadow_map.view
-    dtype = relative.dtype
+    dtype = offset_points.dtype
     rotation = view.view[:3, :3].astype(dtype)
     view_proj = view.view_proj_relative.astype(dtype)
-    axis_depth = -(relative @ rotation[2])
-    texel = np.full(len(relative), view.texel_angle, dtype) if view.ortho else \
-        (view.texel_angle * np.maximum(axis_depth, view.near)).astype(dtype)
-    offset_points = relative + normals * (NORMAL_OFFSET_TEXELS * texel)[:, None]
     clip = offset_points @ view_proj[:3, :3].T + view_proj[:3, 3]
     w = offset_points @ view_proj[3, :3] + view_proj[3, 3]
     valid = w > 1e-12
@@ -155,9 +172,9 @@ def _lookup_one(shadow_map: ShadowMap, relative, normals):
     v = (ndc[:, 1] * 0.5 + 0.5) * size - 0.5
     u0, v0 = np.floor(u), np.floor(v)
     fu, fv = u - u0, v - v0
-    u0 = u0.astype(np.int64)
-    v0 = v0.astype(np.int64)
-    lit = np.zeros(len(relative), np.float32)
+    u0 = np.nan_to_num(u0, nan=0.0, posinf=0.0, neginf=0.0).astype(np.int64)
+    v0 = np.nan_to_num(v0, nan=0.0, posinf=0.0, neginf=0.0).astype(np.int64)
+    lit = np.zeros(len(offset_points), np.float32)
     threshold = (receiver_depth - DEPTH_BIAS_TEXELS * texel).astype(np.float32)
     x0 = np.clip(u0, 0, size - 1)
     x1 = np.clip(u0 + 1, 0, size - 1)
@@ -170,6 +187,13 @@ def _lookup_one(shadow_map: ShadowMap, relative, normals):
                           (row1 + x0, (1 - fu) * fv), (row1 + x1, fu * fv)):
         lit += weight * (threshold <= linear[index])
     return np.where(inside, lit, np.nan)
+
+
+def _cube_face(points):
+    """Cube face index (+x, -x, +y, -y, +z, -z order of CUBE_FACES) of each point's major axis."""
+    axis = np.argmax(np.abs(points), axis=1)
+    negative = np.take_along_axis(points, axis[:, None], axis=1)[:, 0] < 0
+    return axis * 2 + negative
 
 
 def shadow_visibility(shadow_maps, points, normals, origin=None) -> np.ndarray:
@@ -187,16 +211,24 @@ def shadow_visibility(shadow_maps, points, normals, origin=None) -> np.ndarray:
     # Every view of one light shares its origin.
     relative = points + (np.asarray(origin, np.float64) - shadow_maps[0].view.origin).astype(points.dtype)
     if len(shadow_maps) == 6:
-        # Cube: each point is looked up in the face of its major axis only.
-        axis = np.argmax(np.abs(relative), axis=1)
-        sign = np.take_along_axis(relative, axis[:, None], axis=1)[:, 0] < 0
-        face = axis * 2 + sign
+        # Cube: the texel size from the face of the point, the face looked up from the offset
+        # point (near a seam the offset can cross into the neighbouring face).
+        first = _cube_face(relative)
+        texel = np.empty(len(points), relative.dtype)
+        for index, shadow_map in enumerate(shadow_maps):
+            chosen = first == index
+            if np.any(chosen):
+                texel[chosen] = _texel_size(shadow_map.view, relative[chosen])
+        offset_points = relative + normals * (NORMAL_OFFSET_TEXELS * texel)[:, None]
+        face = _cube_face(offset_points)
         result = np.ones(len(points))
         for index, shadow_map in enumerate(shadow_maps):
             chosen = face == index
             if np.any(chosen):
-                lit = _lookup_one(shadow_map, relative[chosen], normals[chosen])
+                lit = _lookup_one(shadow_map, offset_points[chosen], texel[chosen])
                 result[chosen] = np.where(np.isnan(lit), 1.0, lit)
         return result
-    lit = _lookup_one(shadow_maps[0], relative, normals)
+    texel = _texel_size(shadow_maps[0].view, relative)
+    offset_points = relative + normals * (NORMAL_OFFSET_TEXELS * texel)[:, None]
+    lit = _lookup_one(shadow_maps[0], offset_points, texel)
     return np.where(np.isnan(lit), 1.0, lit)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.frame import ShadowRegionIndex, shadow_region
+from phrt.phrt_addon.shadow_region import ShadowRegionIndex, shadow_region
 from phrt.phrt_addon.scene import Light
 
 LIGHTS = {

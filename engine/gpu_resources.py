@@ -1,0 +1,259 @@
+"""The one owner of PHRT's GPU resources, kept across ``render()`` calls.
+
+GPU objects created in one ``render()`` are valid in later ones (PLATFORM-NOTES,
+"GPU module in background mode"), so what a frame needs is created once and kept
+while it stays valid:
+
+- shaders: created on first use, kept for the process;
+- meshes: a vertex buffer and one index buffer / batch per (material, element)
+  group, keyed by the mesh's content (``MeshInstance.geometry_key``): a moved object
+  keeps its batches (its transform is a push constant), an edited mesh gets new ones
+  and its old ones are dropped at the end of the frame (``retain_meshes``);
+- material textures, keyed by image and size; the material table (a small float
+  texture), keyed by its content;
+- shadow maps (``ShadowAtlas``), keyed by their light and the geometry they see: a
+  moved light re-renders only its own map;
+- the frame's render targets, keyed by resolution.
+
+Framebuffers are created per ``render()`` (they are not shared between contexts in a
+UI session).  Nothing is freed in ``__del__``: ``release()`` drops every reference
+deliberately, at the end of a replay, on file load and on unregister.
+
+``counts()`` reports how many of each kind were created and freed, so tests can check
+that a static replay creates nothing after its first frame and frees what it created.
+"""
+from __future__ import annotations
+
+import hashlib
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import shaders
+
+# Largest texture side uploaded for a material (bigger images are point-downsampled).
+MAX_TEXTURE_SIZE = 2048
+
+
+def gpu_module():
+    import gpu  # only inside render()/view_draw(): drawing is unavailable at module level in background mode
+    return gpu
+
+
+@dataclass
+class ShadowAtlas:
+    """The shadow maps of one light on the GPU: one view (sun, spot) or six cube faces
+    in a 3 x 2 grid of tiles, each texel the linear light-space depth (R32F)."""
+
+    texture: object
+    views: list  # shadowmap.LightView per tile
+    face_size: int
+
+
+class GPUResources:
+    def __init__(self):
+        self._shaders = {}
+        self._meshes = {}  # geometry key -> (vertex buffer, [(material, element, batch)])
+        self._textures = {}  # texture key -> GPUTexture
+        self._material_table = (None, None)  # (content key, GPUTexture)
+        self._shadows = {}  # shadow key -> ShadowAtlas
+        self._targets = {}  # (width, height) -> {name: GPUTexture}
+        self._constants = {}  # small fixed objects: fullscreen quad, placeholder textures
+        self.created = Counter()
+        self.freed = Counter()
+        self.frames_drawn = 0  # G-buffers drawn into the targets (the viewport checks its image is current)
+
+    # -- bookkeeping -------------------------------------------------------
+    def counts(self) -> dict:
+        """{kind: (created, freed)} since this owner was made."""
+        kinds = set(self.created) | set(self.freed)
+        return {kind: (self.created[kind], self.freed[kind]) for kind in sorted(kinds)}
+
+    def live(self) -> dict:
+        return {kind: created - freed for kind, (created, freed) in self.counts().items()}
+
+    def release(self, keep_shaders: bool = False):
+        """Drop every GPU object (file load, unregister), or everything that belongs to a scene
+        (``keep_shaders``: the end of a replay; shaders depend on no scene and compiling them
+        again costs a first draw of 0.3-0.6 s on llvmpipe)."""
+        if not keep_shaders:
+            self.freed["shader"] += len(self._shaders)
+            self._shaders.clear()
+            self.freed["constant"] += len(self._constants)
+            self._constants.clear()
+        self.freed["mesh"] += len(self._meshes)
+        self.freed["texture"] += len(self._textures)
+        self.freed["material_table"] += self._material_table[1] is not None
+        self.freed["shadow_map"] += len(self._shadows)
+        self.freed["target"] += sum(len(targets) for targets in self._targets.values())
+        self._meshes.clear()
+        self._textures.clear()
+        self._material_table = (None, None)
+        self._shadows.clear()
+        self._targets.clear()
+
+    @property
+    def empty(self) -> bool:
+        return not (self._shaders or self._meshes or self._textures or self._shadows or self._targets
+                    or self._constants or self._material_table[1] is not None)
+
+    # -- shaders -------------------------------------------------------------
+    def shader(self, name: str):
+        shader = self._shaders.get(name)
+        if shader is None:
+            from ..phrt_addon.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
+            gpu = gpu_module()
+            builders = {
+                "gbuffer": lambda: shaders.build_gbuffer(gpu),
+                "shadow": lambda: shaders.build_shadow(gpu),
+                "lighting": lambda: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
+                "resolve": lambda: shaders.build_resolve(gpu),
+                "composite": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
+            }
+            shader = self._shaders[name] = builders[name]()
+            self.created["shader"] += 1
+        return shader
+
+    def fullscreen_batch(self, shader):
+        """Two triangles covering the viewport (one per shader: batches bind to a program)."""
+        key = ("quad", id(shader))
+        batch = self._constants.get(key)
+        if batch is None:
+            gpu = gpu_module()
+            fmt = gpu.types.GPUVertFormat()
+            fmt.attr_add(id="pos", comp_type="F32", len=2, fetch_mode="FLOAT")
+            vbo = gpu.types.GPUVertBuf(fmt, 6)
+            vbo.attr_fill("pos", [(-1, -1), (1, -1), (1, 1), (-1, -1), (1, 1), (-1, 1)])
+            batch = self._constants[key] = gpu.types.GPUBatch(type="TRIS", buf=vbo)
+            self.created["constant"] += 1
+        return batch
+
+    def placeholder(self, value: float):
+        """A 1x1 RGBA32F texture of ``value`` bound where a pass has nothing to read."""
+        key = ("placeholder", float(value))
+        texture = self._constants.get(key)
+        if texture is None:
+            gpu = gpu_module()
+            texture = self._constants[key] = gpu.types.GPUTexture(
+                (1, 1), format="RGBA32F", data=gpu.types.Buffer("FLOAT", 4, [float(value)] * 4))
+            self.created["constant"] += 1
+        return texture
+
+    # -- meshes --------------------------------------------------------------
+    def mesh_batches(self, mesh):
+        """(vertex buffer, [(material, element, batch)]) of a mesh, uploaded on first use."""
+        entry = self._meshes.get(mesh.geometry_key)
+        if entry is None:
+            gpu = gpu_module()
+            corners = mesh.triangles.reshape(-1)
+            uvs = mesh.corner_uvs if mesh.corner_uvs is not None else np.zeros((len(corners), 2), np.float32)
+            fmt = gpu.types.GPUVertFormat()
+            fmt.attr_add(id="pos", comp_type="F32", len=3, fetch_mode="FLOAT")
+            fmt.attr_add(id="nor", comp_type="F32", len=3, fetch_mode="FLOAT")
+            fmt.attr_add(id="uv", comp_type="F32", len=2, fetch_mode="FLOAT")
+            vbo = gpu.types.GPUVertBuf(fmt, len(corners))
+            vbo.attr_fill("pos", np.ascontiguousarray(mesh.positions[corners], dtype=np.float32))
+            vbo.attr_fill("nor", np.ascontiguousarray(mesh.corner_normals, dtype=np.float32))
+            vbo.attr_fill("uv", np.ascontiguousarray(uvs, dtype=np.float32))
+            groups = []
+            for material, element, triangles in mesh.material_groups():
+                indices = np.ascontiguousarray((triangles[:, None] * 3 + np.arange(3)[None, :]).astype(np.int32))
+                ibo = gpu.types.GPUIndexBuf(type="TRIS", seq=indices)
+                groups.append((int(material), int(element), gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo)))
+            entry = self._meshes[mesh.geometry_key] = (vbo, groups)
+            self.created["mesh"] += 1
+            self.created["upload"] += 1
+        return entry
+
+    def retain_meshes(self, keys):
+        """Drop the batches of meshes no longer drawn (an edited mesh's old content)."""
+        for key in [key for key in self._meshes if key not in keys]:
+            del self._meshes[key]
+            self.freed["mesh"] += 1
+
+    # -- textures ------------------------------------------------------------
+    def material_texture(self, material):
+        if material.texture is None:
+            return None
+        image = material.texture
+        key = (material.texture_key or material.name, image.shape)
+        texture = self._textures.get(key)
+        if texture is None:
+            gpu = gpu_module()
+            image = np.asarray(image, dtype=np.float32)
+            height, width = image.shape[:2]
+            step = max(1, int(np.ceil(max(height, width) / MAX_TEXTURE_SIZE)))
+            image = np.ascontiguousarray(image[::step, ::step, :4])
+            height, width = image.shape[:2]
+            buffer = gpu.types.Buffer("FLOAT", width * height * 4, image.ravel())
+            texture = self._textures[key] = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buffer)
+            self.created["texture"] += 1
+            self.created["upload"] += 1
+        return texture
+
+    def material_table(self, table):
+        """The per-material optical terms the lighting passes read (shading.MaterialTable)."""
+        count = len(table.ior)
+        width = min(count, shaders.MATERIAL_TABLE_WIDTH)
+        bands = -(-count // shaders.MATERIAL_TABLE_WIDTH)
+        texels = np.zeros((bands * 2, width, 4), np.float32)
+        index = np.arange(count)
+        column, band = index % shaders.MATERIAL_TABLE_WIDTH, index // shaders.MATERIAL_TABLE_WIDTH
+        texels[band * 2, column, 0] = table.transmission
+        texels[band * 2, column, 1] = table.ior
+        texels[band * 2, column, 2] = table.alpha
+        texels[band * 2 + 1, column, :3] = table.emission
+        key = hashlib.blake2b(texels.tobytes(), digest_size=16).hexdigest()
+        if self._material_table[0] != key:
+            gpu = gpu_module()
+            buffer = gpu.types.Buffer("FLOAT", texels.size, texels.ravel())
+            if self._material_table[1] is not None:
+                self.freed["material_table"] += 1
+            self._material_table = (key, gpu.types.GPUTexture((width, bands * 2), format="RGBA32F", data=buffer))
+            self.created["material_table"] += 1
+            self.created["upload"] += 1
+        return self._material_table[1]
+
+    # -- shadow maps ---------------------------------------------------------
+    def shadow_atlas(self, key):
+        return self._shadows.get(key)
+
+    def put_shadow_atlas(self, key, atlas: ShadowAtlas):
+        if key in self._shadows:
+            self.freed["shadow_map"] += 1
+        self._shadows[key] = atlas
+        self.created["shadow_map"] += 1
+
+    def retain_shadows(self, keys):
+        """Drop maps of lights that moved or geometry that changed (a dragged light must not
+        pile up maps)."""
+        for key in [key for key in self._shadows if key not in keys]:
+            del self._shadows[key]
+            self.freed["shadow_map"] += 1
+
+    # -- render targets ------------------------------------------------------
+    TARGET_FORMATS = {
+        "opaque_position": "RGBA32F", "opaque_normal": "RGBA32F", "opaque_albedo": "RGBA8",
+        "opaque_element": "R32UI", "opaque_depth": "DEPTH_COMPONENT32F",
+        "transparent_position": "RGBA32F", "transparent_normal": "RGBA32F", "transparent_albedo": "RGBA8",
+        "transparent_element": "R32UI", "transparent_depth": "DEPTH_COMPONENT32F",
+        "normal_depth": "RGBA32F", "front_element": "R32UI",
+        "opaque_light": "RGBA32F", "transparent_light": "RGBA32F", "combined": "RGBA32F",
+    }
+
+    def targets(self, width: int, height: int) -> dict:
+        """The frame's textures at this resolution (kept; other resolutions are dropped)."""
+        key = (int(width), int(height))
+        targets = self._targets.get(key)
+        if targets is None:
+            gpu = gpu_module()
+            for old in list(self._targets):
+                self.freed["target"] += len(self._targets.pop(old))
+            targets = self._targets[key] = {name: gpu.types.GPUTexture(key, format=fmt)
+                                            for name, fmt in self.TARGET_FORMATS.items()}
+            self.created["target"] += len(targets)
+        return targets
+
+
+RESOURCES = GPUResources()

@@ -1,0 +1,481 @@
+"""GLSL of the raster half: G-buffer, shadow maps, deferred lighting, resolve and composite.
+
+Every shader is built from a ``GPUShaderCreateInfo`` (Blender 5.0 removed the
+source-string constructor) and created once per process by
+``engine/gpu_resources.py``.
+
+The lighting and composite shaders implement the surface response of
+``phrt_addon/shading.py`` (Lambert + GGX/Smith/Schlick, the uniform-environment
+ambient and exact dielectric Fresnel) and the shadow-map lookup of
+``phrt_addon/shadowmap.py`` line for line, so the GPU image of a G-buffer equals
+the numpy reference (``phrt_addon/lighting.py``); ``tests/integration/
+test_gpu_frame.py`` checks the two agree within 1e-3 relative on lit pixels.
+
+G-buffer layout (one texture set per layer, opaque and transparent):
+- ``position``  RGBA32F: camera-relative position (float32 keeps precision at any
+  world coordinate), w = material index + 1 (0 = nothing drawn);
+- ``normal``    RGBA32F: shading normal (front-facing), w = roughness;
+- ``albedo``    RGBA8:   sqrt of the base colour with its texture applied (8 bits are
+  enough for shading inputs once the darks get more codes), a = metallic;
+- ``element``   R32UI:   element index + 1 (0 = not part of an element), 32 bits.
+"""
+from __future__ import annotations
+
+# Materials are stored in a float texture, MATERIAL_TABLE_WIDTH per row pair:
+# row 2k: (transmission, ior, alpha, 0); row 2k+1: (emission rgb, 0).
+MATERIAL_TABLE_WIDTH = 1024
+# Cube-map shadow atlases hold the six faces in a 3 x 2 grid of tiles.
+ATLAS_COLUMNS = 3
+LIGHT_KIND_CODES = {"SUN": 0, "POINT": 1, "SPOT": 2, "AREA": 3}
+
+GBUFFER_VERT = """
+void main() {
+  vec4 world = model * vec4(pos, 1.0);
+  v_position = world.xyz;
+  v_normal = transpose(inverse(mat3(model))) * nor;
+  v_uv = uv;
+  gl_Position = frame.view_proj * world;
+}
+"""
+
+GBUFFER_FRAG = """
+void main() {
+  vec3 n = normalize(v_normal);
+  if (!gl_FrontFacing) { n = -n; }
+  vec4 albedo = base_color;
+  /* Wrap like the tracer (sample_texture): GPUTexture clamps to its edge by default. */
+  if (params.z > 0.5) { albedo *= texture(base_tex, fract(v_uv)); }
+  albedo = clamp(albedo, 0.0, 1.0);
+  out_position = vec4(v_position, float(ids.x + 1));
+  out_normal = vec4(n, params.x);
+  /* 8 bits per channel of sqrt(albedo): a game G-buffer's precision, where it matters (darks). */
+  out_albedo = vec4(sqrt(albedo.rgb), clamp(params.y, 0.0, 1.0));
+  out_element = uint(ids.y + 1);
+}
+"""
+
+SHADOW_VERT = """
+void main() {
+  vec4 world = model * vec4(pos, 1.0);
+  v_axis_depth = -dot(world.xyz, frame.axis.xyz);
+  gl_Position = frame.view_proj * world;
+}
+"""
+
+SHADOW_FRAG = """
+void main() {
+  out_depth = v_axis_depth;
+}
+"""
+
+FULLSCREEN_VERT = """
+void main() {
+  gl_Position = vec4(pos, 0.0, 1.0);
+}
+"""
+
+# Functions shared by the lighting and composite passes: shading.py in GLSL.
+COMMON_LIB = """
+#define PHRT_INV_PI 0.3183098861837907
+#define PHRT_MIN_ROUGHNESS 0.04
+
+struct Surface {
+  bool covered;
+  vec3 position;
+  vec3 normal;
+  vec3 view;
+  vec3 albedo;
+  float metallic;
+  float roughness;
+  float transmission;
+  float ior;
+  float alpha_blend;
+  vec3 emission;
+  vec3 f0;
+  float diffuse_weight;
+  vec3 diffuse_color;
+  float alpha;
+  float n_dot_v;
+};
+
+vec4 material_row(int index, int row) {
+  ivec2 texel = ivec2(index % MATERIAL_TABLE_WIDTH, (index / MATERIAL_TABLE_WIDTH) * 2 + row);
+  return texelFetch(material_table, texel, 0);
+}
+
+float f0_dielectric(float ior) {
+  float r = (ior - 1.0) / (ior + 1.0);
+  return r * r;
+}
+
+Surface read_surface(vec4 position_material, vec4 normal_roughness, vec4 albedo_metallic) {
+  Surface s;
+  s.covered = position_material.w > 0.5;
+  s.position = position_material.xyz;
+  vec3 view_dir = camera.forward_ortho.w > 0.5 ? camera.forward_ortho.xyz
+                                               : s.position / max(length(s.position), 1e-30);
+  vec3 n = normal_roughness.xyz / max(length(normal_roughness.xyz), 1e-30);
+  /* A normal facing away from the viewer (interpolation at silhouettes) is flipped. */
+  if (dot(n, view_dir) > 0.0) { n = -n; }
+  s.normal = n;
+  s.view = -view_dir;
+  s.albedo = albedo_metallic.rgb * albedo_metallic.rgb;  /* stored as sqrt in 8 bits */
+  s.metallic = albedo_metallic.a;
+  s.roughness = normal_roughness.w;
+  int material = max(int(position_material.w + 0.5) - 1, 0);
+  vec4 optical = material_row(material, 0);
+  s.transmission = optical.x;
+  s.ior = optical.y;
+  s.alpha_blend = optical.z;
+  s.emission = material_row(material, 1).rgb;
+  s.f0 = mix(vec3(f0_dielectric(s.ior)), s.albedo, s.metallic);
+  s.diffuse_weight = (1.0 - s.metallic) * (1.0 - s.transmission);
+  s.diffuse_color = s.albedo * (s.diffuse_weight * PHRT_INV_PI);
+  float r = max(s.roughness, PHRT_MIN_ROUGHNESS);
+  s.alpha = r * r;
+  s.n_dot_v = clamp(dot(s.normal, s.view), 1e-4, 1.0);
+  return s;
+}
+
+vec3 fresnel_schlick(vec3 f0, float cos_theta) {
+  float m = 1.0 - clamp(cos_theta, 0.0, 1.0);
+  return f0 + (1.0 - f0) * (m * m * m * m * m);
+}
+
+float fresnel_dielectric(float cos_incident, float eta) {
+  float cos_i = clamp(abs(cos_incident), 0.0, 1.0);
+  float sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+  if (sin2_t >= 1.0) { return 1.0; }
+  float cos_t = sqrt(clamp(1.0 - sin2_t, 0.0, 1.0));
+  float rs = (cos_i - eta * cos_t) / max(cos_i + eta * cos_t, 1e-30);
+  float rp = (eta * cos_i - cos_t) / max(eta * cos_i + cos_t, 1e-30);
+  return 0.5 * (rs * rs + rp * rp);
+}
+
+vec3 brdf_cosine(Surface s, vec3 l) {
+  float n_dot_l = dot(s.normal, l);
+  if (!(n_dot_l > 0.0)) { return vec3(0.0); }
+  n_dot_l = min(n_dot_l, 1.0);
+  vec3 h = s.view + l;
+  h /= max(length(h), 1e-12);
+  float n_dot_h = clamp(dot(s.normal, h), 0.0, 1.0);
+  float v_dot_h = clamp(dot(s.view, h), 0.0, 1.0);
+  float a2 = s.alpha * s.alpha;
+  float denom = n_dot_h * n_dot_h * (a2 - 1.0) + 1.0;
+  float k = s.alpha * 0.5;
+  float specular = a2 / max(3.14159265358979 * denom * denom, 1e-30)
+                   / max(n_dot_l * (1.0 - k) + k, 1e-30) / (s.n_dot_v * (1.0 - k) + k) * 0.25;
+  vec3 f = fresnel_schlick(s.f0, v_dot_h);
+  return (s.diffuse_color * (1.0 - f) + f * specular) * n_dot_l;
+}
+
+vec3 finite_radiance(vec3 c) {
+  bvec3 bad = isnan(c);
+  c = vec3(bad.x ? 0.0 : c.x, bad.y ? 0.0 : c.y, bad.z ? 0.0 : c.z);
+  return clamp(c, 0.0, 1e6);
+}
+"""
+
+LIGHTING_FRAG = """
+int cube_face(vec3 p) {
+  vec3 a = abs(p);
+  if (a.x >= a.y && a.x >= a.z) { return p.x < 0.0 ? 1 : 0; }
+  if (a.y >= a.z) { return p.y < 0.0 ? 3 : 2; }
+  return p.z < 0.0 ? 5 : 4;
+}
+
+/* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
+   on linear light-space depth).  Cube maps: the face is chosen from the offset point. */
+float shadow_lit(vec3 position, vec3 normal) {
+  int faces = int(light.shadow_offset.w + 0.5);
+  if (faces == 0) { return 1.0; }
+  vec3 rel = position + light.shadow_offset.xyz;
+  int face = faces == 6 ? cube_face(rel) : 0;
+  float texel_angle = light.shadow_params.x;
+  float near = light.shadow_params.y;
+  bool ortho = light.shadow_params.z > 0.5;
+  int size = int(light.shadow_params.w + 0.5);
+  float axis_depth = -dot(rel, light.face_axis[face].xyz);
+  float texel = ortho ? texel_angle : texel_angle * max(axis_depth, near);
+  vec3 p = rel + normal * (NORMAL_OFFSET_TEXELS * texel);
+  if (faces == 6) { face = cube_face(p); }
+  vec4 clip = light.face_view_proj[face] * vec4(p, 1.0);
+  if (!(clip.w > 1e-12)) { return 1.0; }
+  vec3 ndc = clip.xyz / clip.w;
+  if (abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z > 1.0) { return 1.0; }
+  float threshold = -dot(p, light.face_axis[face].xyz) - DEPTH_BIAS_TEXELS * texel;
+  float u = (ndc.x * 0.5 + 0.5) * float(size) - 0.5;
+  float v = (ndc.y * 0.5 + 0.5) * float(size) - 0.5;
+  float u0 = floor(u);
+  float v0 = floor(v);
+  float fu = u - u0;
+  float fv = v - v0;
+  ivec2 tile = ivec2(face % ATLAS_COLUMNS, face / ATLAS_COLUMNS) * size;
+  int x0 = clamp(int(u0), 0, size - 1);
+  int x1 = clamp(int(u0) + 1, 0, size - 1);
+  int y0 = clamp(int(v0), 0, size - 1);
+  int y1 = clamp(int(v0) + 1, 0, size - 1);
+  float lit = 0.0;
+  lit += (1.0 - fu) * (1.0 - fv) * float(threshold <= texelFetch(shadow_map, tile + ivec2(x0, y0), 0).r);
+  lit += fu * (1.0 - fv) * float(threshold <= texelFetch(shadow_map, tile + ivec2(x1, y0), 0).r);
+  lit += (1.0 - fu) * fv * float(threshold <= texelFetch(shadow_map, tile + ivec2(x0, y1), 0).r);
+  lit += fu * fv * float(threshold <= texelFetch(shadow_map, tile + ivec2(x1, y1), 0).r);
+  return lit;
+}
+
+/* shading.light_incidence: direction to the light and irradiance before shadows and cosine. */
+vec3 incidence(vec3 position, out vec3 direction) {
+  int kind = int(light.color_kind.w + 0.5);
+  vec3 color = light.color_kind.rgb;
+  if (kind == 0) {
+    direction = -light.direction.xyz;
+    return color;
+  }
+  vec3 to_light = light.position_radius.xyz - position;
+  float dist = length(to_light);
+  direction = to_light / max(dist, 1e-6);
+  float intensity;
+  if (kind == 3) {
+    intensity = clamp(-dot(direction, light.direction.xyz), 0.0, 1.0) * PHRT_INV_PI;
+  }
+  else {
+    intensity = 0.25 * PHRT_INV_PI;
+    if (kind == 2) {
+      float cos_angle = -dot(direction, light.direction.xyz);
+      float spot = clamp((cos_angle - light.spot.x) / max(light.spot.y - light.spot.x, 1e-6), 0.0, 1.0);
+      intensity *= spot * spot * (3.0 - 2.0 * spot);
+    }
+  }
+  float radius = light.position_radius.w;
+  return color * (intensity / (dist * dist + radius * radius));
+}
+
+vec3 light_layer(Surface s, float override_visibility) {
+  if (!s.covered) { return vec3(0.0); }
+  vec3 direction;
+  vec3 irradiance = incidence(s.position, direction);
+  vec3 response = brdf_cosine(s, direction);
+  if (response == vec3(0.0)) { return vec3(0.0); }
+  float visibility = 1.0;
+  if (light.spot.z > 0.5) {
+    visibility = override_visibility >= 0.0 ? override_visibility : shadow_lit(s.position, s.normal);
+  }
+  return response * irradiance * visibility;
+}
+
+void main() {
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),
+                                texelFetch(opaque_albedo, pixel, 0));
+  Surface transparent = read_surface(texelFetch(transparent_position, pixel, 0),
+                                     texelFetch(transparent_normal, pixel, 0),
+                                     texelFetch(transparent_albedo, pixel, 0));
+  float opaque_override = -1.0;
+  float transparent_override = -1.0;
+  if (light.spot.w > 0.5) {
+    opaque_override = texelFetch(opaque_visibility, pixel, 0).r;
+    transparent_override = texelFetch(transparent_visibility, pixel, 0).r;
+  }
+  out_opaque = vec4(light_layer(opaque, opaque_override), 0.0);
+  out_transparent = vec4(light_layer(transparent, transparent_override), 0.0);
+}
+"""
+
+RESOLVE_FRAG = """
+void main() {
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  vec4 opaque = texelFetch(opaque_position, pixel, 0);
+  vec4 transparent = texelFetch(transparent_position, pixel, 0);
+  bool front_transparent = transparent.w > 0.5;
+  vec4 front = front_transparent ? transparent : opaque;
+  vec3 normal = front_transparent ? texelFetch(transparent_normal, pixel, 0).xyz
+                                  : texelFetch(opaque_normal, pixel, 0).xyz;
+  float depth = front.w > 0.5 ? dot(front.xyz, camera.forward_ortho.xyz) : 1e10;
+  out_normal_depth = vec4(front.w > 0.5 ? normal : vec3(0.0), depth);
+  out_element = front_transparent ? texelFetch(transparent_element, pixel, 0).r
+                                  : texelFetch(opaque_element, pixel, 0).r;
+}
+"""
+
+COMPOSITE_FRAG = """
+/* The layer's colour: emission, the accumulated lights, ambient diffuse and the reflection
+   (the uniform environment, or the traced radiance where a ray was traced). */
+vec3 shade_layer(Surface s, vec3 lights, vec4 traced_reflection, out float transmissive, out float fresnel_t) {
+  vec3 world = camera.world.rgb;
+  float m = 1.0 - clamp(s.n_dot_v, 0.0, 1.0);
+  float ceiling = max(1.0 - s.roughness, max(s.f0.r, max(s.f0.g, s.f0.b)));
+  vec3 env_fresnel = s.f0 + (max(vec3(ceiling), s.f0) - s.f0) * (m * m * m * m * m);
+  vec3 color = s.emission + lights + s.albedo * s.diffuse_weight * (1.0 - env_fresnel) * world;
+  transmissive = s.transmission * (1.0 - s.metallic);
+  fresnel_t = fresnel_dielectric(clamp(dot(s.normal, s.view), 0.0, 1.0), s.ior);
+  vec3 reflect_weight = env_fresnel * (1.0 - transmissive) + transmissive * fresnel_t;
+  vec3 reflected = traced_reflection.a > 0.5 ? traced_reflection.rgb : world;
+  return color + reflect_weight * reflected;
+}
+
+void main() {
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),
+                                texelFetch(opaque_albedo, pixel, 0));
+  vec3 image = camera.world.rgb;
+  float transmissive;
+  float fresnel_t;
+  vec4 no_trace = vec4(0.0);
+  if (opaque.covered) {
+    vec4 traced = camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : no_trace;
+    image = shade_layer(opaque, texelFetch(opaque_light, pixel, 0).rgb, traced, transmissive, fresnel_t);
+  }
+  Surface transparent = read_surface(texelFetch(transparent_position, pixel, 0),
+                                     texelFetch(transparent_normal, pixel, 0),
+                                     texelFetch(transparent_albedo, pixel, 0));
+  if (transparent.covered) {
+    vec4 traced = camera.traced.y > 0.5 ? texelFetch(transparent_reflection, pixel, 0) : no_trace;
+    vec3 surface_color = shade_layer(transparent, texelFetch(transparent_light, pixel, 0).rgb, traced,
+                                     transmissive, fresnel_t);
+    /* Raster: straight through, no bending; traced: the refracted radiance. */
+    vec3 behind = image;
+    if (camera.traced.z > 0.5) {
+      vec4 refracted = texelFetch(refraction, pixel, 0);
+      if (refracted.a > 0.5) { behind = refracted.rgb; }
+    }
+    vec3 transmitted = (transmissive * (1.0 - fresnel_t)) * transparent.albedo * behind;
+    float alpha = transparent.alpha_blend;
+    image = alpha * (surface_color + transmitted) + (1.0 - alpha) * behind;
+  }
+  out_combined = vec4(finite_radiance(image), 1.0);
+}
+"""
+
+CAMERA_STRUCT = """
+struct CameraData {
+  vec4 forward_ortho;  /* camera axis, w = 1 for orthographic */
+  vec4 world;          /* uniform environment colour */
+  vec4 traced;         /* x: opaque reflections, y: transparent reflections, z: refractions uploaded */
+};
+"""
+
+FRAME_STRUCT = "struct FrameData { mat4 view_proj; vec4 axis; };"
+
+LIGHT_STRUCT = """
+struct LightData {
+  mat4 face_view_proj[6];  /* shadow views, acting on positions relative to the view origin */
+  vec4 face_axis[6];       /* each view's +Z axis: light-space depth = -dot(p, axis) */
+  vec4 color_kind;         /* linear colour * strength, kind code */
+  vec4 position_radius;    /* camera-relative position, soft radius (>= 1e-3) */
+  vec4 direction;          /* unit direction the light travels */
+  vec4 spot;               /* cos outer, cos inner, casts shadows, has traced visibility */
+  vec4 shadow_offset;      /* camera position - view origin, number of views (0: no map) */
+  vec4 shadow_params;      /* texel angle, near, orthographic, view size in texels */
+};
+"""
+
+
+def _defines(info, normal_offset_texels, depth_bias_texels):
+    info.define("MATERIAL_TABLE_WIDTH", str(MATERIAL_TABLE_WIDTH))
+    info.define("ATLAS_COLUMNS", str(ATLAS_COLUMNS))
+    info.define("NORMAL_OFFSET_TEXELS", repr(float(normal_offset_texels)))
+    info.define("DEPTH_BIAS_TEXELS", repr(float(depth_bias_texels)))
+
+
+def _layer_samplers(info, first_slot, with_albedo=True, with_element=False):
+    slot = first_slot
+    for layer in ("opaque", "transparent"):
+        info.sampler(slot, "FLOAT_2D", f"{layer}_position")
+        info.sampler(slot + 1, "FLOAT_2D", f"{layer}_normal")
+        slot += 2
+        if with_albedo:
+            info.sampler(slot, "FLOAT_2D", f"{layer}_albedo")
+            slot += 1
+        if with_element:
+            info.sampler(slot, "UINT_2D", f"{layer}_element")
+            slot += 1
+    return slot
+
+
+def build_gbuffer(gpu):
+    info = gpu.types.GPUShaderCreateInfo()
+    info.typedef_source(FRAME_STRUCT)
+    info.uniform_buf(0, "FrameData", "frame")
+    info.push_constant("MAT4", "model")
+    info.push_constant("VEC4", "base_color")
+    info.push_constant("VEC4", "params")  # roughness, metallic, has_texture, unused
+    info.push_constant("IVEC2", "ids")  # material index, element index (-1: none)
+    info.sampler(0, "FLOAT_2D", "base_tex")
+    interface = gpu.types.GPUStageInterfaceInfo("phrt_gbuffer_iface")
+    interface.smooth("VEC3", "v_position")
+    interface.smooth("VEC3", "v_normal")
+    interface.smooth("VEC2", "v_uv")
+    info.vertex_in(0, "VEC3", "pos")
+    info.vertex_in(1, "VEC3", "nor")
+    info.vertex_in(2, "VEC2", "uv")
+    info.vertex_out(interface)
+    info.fragment_out(0, "VEC4", "out_position")
+    info.fragment_out(1, "VEC4", "out_normal")
+    info.fragment_out(2, "VEC4", "out_albedo")
+    info.fragment_out(3, "UINT", "out_element")
+    info.vertex_source(GBUFFER_VERT)
+    info.fragment_source(GBUFFER_FRAG)
+    return gpu.shader.create_from_info(info)
+
+
+def build_shadow(gpu):
+    info = gpu.types.GPUShaderCreateInfo()
+    info.typedef_source(FRAME_STRUCT)
+    info.uniform_buf(0, "FrameData", "frame")
+    info.push_constant("MAT4", "model")
+    interface = gpu.types.GPUStageInterfaceInfo("phrt_shadow_iface")
+    interface.smooth("FLOAT", "v_axis_depth")
+    info.vertex_in(0, "VEC3", "pos")
+    info.vertex_out(interface)
+    info.fragment_out(0, "FLOAT", "out_depth")
+    info.vertex_source(SHADOW_VERT)
+    info.fragment_source(SHADOW_FRAG)
+    return gpu.shader.create_from_info(info)
+
+
+def build_lighting(gpu, normal_offset_texels, depth_bias_texels):
+    info = gpu.types.GPUShaderCreateInfo()
+    info.typedef_source(CAMERA_STRUCT + LIGHT_STRUCT)
+    info.uniform_buf(0, "CameraData", "camera")
+    info.uniform_buf(1, "LightData", "light")
+    slot = _layer_samplers(info, 0)
+    info.sampler(slot, "FLOAT_2D", "material_table")
+    info.sampler(slot + 1, "FLOAT_2D", "shadow_map")
+    info.sampler(slot + 2, "FLOAT_2D", "opaque_visibility")
+    info.sampler(slot + 3, "FLOAT_2D", "transparent_visibility")
+    _defines(info, normal_offset_texels, depth_bias_texels)
+    info.vertex_in(0, "VEC2", "pos")
+    info.fragment_out(0, "VEC4", "out_opaque")
+    info.fragment_out(1, "VEC4", "out_transparent")
+    info.vertex_source(FULLSCREEN_VERT)
+    info.fragment_source(COMMON_LIB + LIGHTING_FRAG)
+    return gpu.shader.create_from_info(info)
+
+
+def build_resolve(gpu):
+    info = gpu.types.GPUShaderCreateInfo()
+    info.typedef_source(CAMERA_STRUCT)
+    info.uniform_buf(0, "CameraData", "camera")
+    _layer_samplers(info, 0, with_albedo=False, with_element=True)
+    info.vertex_in(0, "VEC2", "pos")
+    info.fragment_out(0, "VEC4", "out_normal_depth")
+    info.fragment_out(1, "UINT", "out_element")
+    info.vertex_source(FULLSCREEN_VERT)
+    info.fragment_source(RESOLVE_FRAG)
+    return gpu.shader.create_from_info(info)
+
+
+def build_composite(gpu, normal_offset_texels, depth_bias_texels):
+    info = gpu.types.GPUShaderCreateInfo()
+    info.typedef_source(CAMERA_STRUCT)
+    info.uniform_buf(0, "CameraData", "camera")
+    slot = _layer_samplers(info, 0)
+    for offset, name in enumerate(("material_table", "opaque_light", "transparent_light", "opaque_reflection",
+                                   "transparent_reflection", "refraction")):
+        info.sampler(slot + offset, "FLOAT_2D", name)
+    _defines(info, normal_offset_texels, depth_bias_texels)
+    info.vertex_in(0, "VEC2", "pos")
+    info.fragment_out(0, "VEC4", "out_combined")
+    info.vertex_source(FULLSCREEN_VERT)
+    info.fragment_source(COMMON_LIB + COMPOSITE_FRAG)
+    return gpu.shader.create_from_info(info)
