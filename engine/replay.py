@@ -289,8 +289,8 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
     return run.finish(cancelled=cancelled)
 
 
-EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gpu_upload_ms", "upload_ms", "setup_ms", "shadow_rays", "reflection_rays",
-                       "refraction_rays", "time_left_ms", "triangles")
+EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
+                       "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
 
 
 def default_run_dir(out_root, scene_label, camera_name, mode) -> Path:
