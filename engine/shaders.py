@@ -185,7 +185,7 @@ int cube_face(vec3 p) {
 }
 
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
-   on linear light-space depth).  Cube maps: the face is chosen from the offset point. */
+   on linear light-space depth, one gather).  Cube maps: the face is chosen from the offset point. */
 float shadow_lit(vec3 position, vec3 normal) {
   int faces = int(light.shadow_offset.w + 0.5);
   if (faces == 0) { return 1.0; }
@@ -204,23 +204,19 @@ float shadow_lit(vec3 position, vec3 normal) {
   vec3 ndc = clip.xyz / clip.w;
   if (abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z > 1.0) { return 1.0; }
   float threshold = -dot(p, light.face_axis[face].xyz) - DEPTH_BIAS_TEXELS * texel;
-  float u = (ndc.x * 0.5 + 0.5) * float(size) - 0.5;
-  float v = (ndc.y * 0.5 + 0.5) * float(size) - 0.5;
-  float u0 = floor(u);
-  float v0 = floor(v);
-  float fu = u - u0;
-  float fv = v - v0;
-  ivec2 tile = ivec2(face % ATLAS_COLUMNS, face / ATLAS_COLUMNS) * size;
-  int x0 = clamp(int(u0), 0, size - 1);
-  int x1 = clamp(int(u0) + 1, 0, size - 1);
-  int y0 = clamp(int(v0), 0, size - 1);
-  int y1 = clamp(int(v0) + 1, 0, size - 1);
-  float lit = 0.0;
-  lit += (1.0 - fu) * (1.0 - fv) * float(threshold <= texelFetch(shadow_map, tile + ivec2(x0, y0), 0).r);
-  lit += fu * (1.0 - fv) * float(threshold <= texelFetch(shadow_map, tile + ivec2(x1, y0), 0).r);
-  lit += (1.0 - fu) * fv * float(threshold <= texelFetch(shadow_map, tile + ivec2(x0, y1), 0).r);
-  lit += fu * fv * float(threshold <= texelFetch(shadow_map, tile + ivec2(x1, y1), 0).r);
-  return lit;
+  vec2 uv = (ndc.xy * 0.5 + 0.5) * float(size) - 0.5;
+  vec2 origin = floor(uv);
+  vec2 f = uv - origin;
+  /* Taps outside the view repeat its edge texel (as shadowmap.py clamps each tap). */
+  f = mix(f, vec2(0.0), lessThan(origin, vec2(0.0)));
+  f = mix(f, vec2(1.0), greaterThan(origin, vec2(float(size - 2))));
+  origin = clamp(origin, vec2(0.0), vec2(float(size - 2)));
+  vec2 tile = vec2(float((face % ATLAS_COLUMNS) * size), float((face / ATLAS_COLUMNS) * size));
+  /* One gather at the corner shared by the 2x2 texels: w = (x0, y0), z = (x1, y0),
+     x = (x0, y1), y = (x1, y1). */
+  vec4 depth = textureGather(shadow_map, (tile + origin + 1.0) / vec2(textureSize(shadow_map, 0)), 0);
+  vec4 lit = vec4(greaterThanEqual(depth, vec4(threshold)));
+  return mix(mix(lit.w, lit.z, f.x), mix(lit.x, lit.y, f.x), f.y);
 }
 
 /* shading.light_incidence: direction to the light and irradiance before shadows and cosine. */
@@ -265,19 +261,22 @@ vec3 light_layer(Surface s, float override_visibility) {
 
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
-  Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),
-                                texelFetch(opaque_albedo, pixel, 0));
-  Surface transparent = read_surface(texelFetch(transparent_position, pixel, 0),
-                                     texelFetch(transparent_normal, pixel, 0),
-                                     texelFetch(transparent_albedo, pixel, 0));
-  float opaque_override = -1.0;
-  float transparent_override = -1.0;
-  if (light.spot.w > 0.5) {
-    opaque_override = texelFetch(opaque_visibility, pixel, 0).r;
-    transparent_override = texelFetch(transparent_visibility, pixel, 0).r;
+  bool traced = light.spot.w > 0.5;
+  out_opaque = vec4(0.0);
+  out_transparent = vec4(0.0);
+  /* A layer's other targets are read only where it covers the pixel (the transparent layer
+     rarely does). */
+  vec4 position = texelFetch(opaque_position, pixel, 0);
+  if (position.w > 0.5) {
+    Surface opaque = read_surface(position, texelFetch(opaque_normal, pixel, 0), texelFetch(opaque_albedo, pixel, 0));
+    out_opaque.rgb = light_layer(opaque, traced ? texelFetch(opaque_visibility, pixel, 0).r : -1.0);
   }
-  out_opaque = vec4(light_layer(opaque, opaque_override), 0.0);
-  out_transparent = vec4(light_layer(transparent, transparent_override), 0.0);
+  position = texelFetch(transparent_position, pixel, 0);
+  if (position.w > 0.5) {
+    Surface transparent = read_surface(position, texelFetch(transparent_normal, pixel, 0),
+                                       texelFetch(transparent_albedo, pixel, 0));
+    out_transparent.rgb = light_layer(transparent, traced ? texelFetch(transparent_visibility, pixel, 0).r : -1.0);
+  }
 }
 """
 
