@@ -87,13 +87,23 @@ def _compat_panels():
             yield panel
 
 
+@bpy.app.handlers.persistent
+def _release_on_load(*_args):
+    """Another file: nothing cached for the old one (GPU resources, Embree scenes) is kept."""
+    final.release_caches()
+
+
 def register():
     bpy.utils.register_class(PHRTRenderEngine)
+    if _release_on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(_release_on_load)
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.add(PHRTRenderEngine.bl_idname)
 
 
 def unregister():
+    if _release_on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_release_on_load)
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.discard(PHRTRenderEngine.bl_idname)
     bpy.utils.unregister_class(PHRTRenderEngine)

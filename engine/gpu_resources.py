@@ -19,8 +19,9 @@ Framebuffers are created per ``render()`` (they are not shared between contexts 
 UI session).  Nothing is freed in ``__del__``: ``release()`` drops every reference
 deliberately, at the end of a replay, on file load and on unregister.
 
-``counts()`` reports how many of each kind were created and freed, so tests can check
-that a static replay creates nothing after its first frame and frees what it created.
+``counts()`` reports how many of each kind were created and freed and ``uploads`` how
+often scene data was sent, so tests can check that a static replay creates and uploads
+nothing after its first frame and frees what it created.
 """
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ class GPUResources:
         self._constants = {}  # small fixed objects: fullscreen quad, placeholder textures
         self.created = Counter()
         self.freed = Counter()
+        self.uploads = 0  # scene data sent to the GPU (meshes, textures, material tables)
         self.frames_drawn = 0  # G-buffers drawn into the targets (the viewport checks its image is current)
 
     # -- bookkeeping -------------------------------------------------------
@@ -164,7 +166,7 @@ class GPUResources:
                 groups.append((int(material), int(element), gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo)))
             entry = self._meshes[mesh.geometry_key] = (vbo, groups)
             self.created["mesh"] += 1
-            self.created["upload"] += 1
+            self.uploads += 1
         return entry
 
     def retain_meshes(self, keys):
@@ -190,7 +192,7 @@ class GPUResources:
             buffer = gpu.types.Buffer("FLOAT", width * height * 4, image.ravel())
             texture = self._textures[key] = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buffer)
             self.created["texture"] += 1
-            self.created["upload"] += 1
+            self.uploads += 1
         return texture
 
     def material_table(self, table):
@@ -213,7 +215,7 @@ class GPUResources:
                 self.freed["material_table"] += 1
             self._material_table = (key, gpu.types.GPUTexture((width, bands * 2), format="RGBA32F", data=buffer))
             self.created["material_table"] += 1
-            self.created["upload"] += 1
+            self.uploads += 1
         return self._material_table[1]
 
     # -- shadow maps ---------------------------------------------------------

@@ -92,7 +92,7 @@ class GPUFrame:
         """G-buffer, resolve and its read-back, shadow maps; sets raster_ms and setup_ms."""
         gpu = gpu_module()
         start = time.perf_counter()
-        created_before = sum(self.resources.created[kind] for kind in ("shader", "upload", "shadow_map", "target"))
+        created_before = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
         setup_start = time.perf_counter()
         self._shaders = {name: self.resources.shader(name) for name in ("gbuffer", "resolve", "lighting",
                                                                         "composite", "shadow")}
@@ -112,7 +112,7 @@ class GPUFrame:
             if texture is not None:
                 textures[index] = texture
         self._material_textures = textures
-        created_after = sum(self.resources.created[kind] for kind in ("shader", "upload", "shadow_map", "target"))
+        created_after = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
         setup_ms = _ms(setup_start) if created_after > created_before else 0.0
         setup_ms += self._ensure_shadow_maps(gpu)
         self._draw_gbuffer(gpu)
@@ -429,8 +429,7 @@ class GPUFrame:
                     values = self._light_ubo(gpu, index, light)
                     opaque = uploads["visibility"].get(("opaque", index))
                     transparent = uploads["visibility"].get(("transparent", index))
-                    if opaque is not None or transparent is not None:
-                        values[120 + 15] = 1.0
+                    values[120 + 15] = (opaque is not None) + 2 * (transparent is not None)
                     atlas = self.atlases.get(index)
                     light_ubo = _ubo(gpu, values)  # referenced until drawn: a dropped UBO reads as zeros
                     shader.uniform_block("light", light_ubo)

@@ -261,7 +261,8 @@ vec3 light_layer(Surface s, float override_visibility) {
 
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
-  bool traced = light.spot.w > 0.5;
+  /* Traced lit fractions uploaded for this light: 1 opaque layer, 2 transparent layer. */
+  int traced = int(light.spot.w + 0.5);
   out_opaque = vec4(0.0);
   out_transparent = vec4(0.0);
   /* A layer's other targets are read only where it covers the pixel (the transparent layer
@@ -269,13 +270,14 @@ void main() {
   vec4 position = texelFetch(opaque_position, pixel, 0);
   if (position.w > 0.5) {
     Surface opaque = read_surface(position, texelFetch(opaque_normal, pixel, 0), texelFetch(opaque_albedo, pixel, 0));
-    out_opaque.rgb = light_layer(opaque, traced ? texelFetch(opaque_visibility, pixel, 0).r : -1.0);
+    out_opaque.rgb = light_layer(opaque, (traced & 1) != 0 ? texelFetch(opaque_visibility, pixel, 0).r : -1.0);
   }
   position = texelFetch(transparent_position, pixel, 0);
   if (position.w > 0.5) {
     Surface transparent = read_surface(position, texelFetch(transparent_normal, pixel, 0),
                                        texelFetch(transparent_albedo, pixel, 0));
-    out_transparent.rgb = light_layer(transparent, traced ? texelFetch(transparent_visibility, pixel, 0).r : -1.0);
+    out_transparent.rgb = light_layer(transparent, (traced & 2) != 0 ? texelFetch(transparent_visibility, pixel, 0).r
+                                                                     : -1.0);
   }
 }
 """
@@ -362,7 +364,7 @@ struct LightData {
   vec4 color_kind;         /* linear colour * strength, kind code */
   vec4 position_radius;    /* camera-relative position, soft radius (>= 1e-3) */
   vec4 direction;          /* unit direction the light travels */
-  vec4 spot;               /* cos outer, cos inner, casts shadows, has traced visibility */
+  vec4 spot;               /* cos outer, cos inner, casts shadows, traced layers (1 opaque + 2 transparent) */
   vec4 shadow_offset;      /* camera position - view origin, number of views (0: no map) */
   vec4 shadow_params;      /* texel angle, near, orthographic, view size in texels */
 };

@@ -21,6 +21,7 @@ import phrt  # noqa: E402
 from phrt.engine import final, replay, viewport  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
+from gpu_probe import run_on_gpu  # noqa: E402
 
 WIDTH, HEIGHT = 160, 120
 PATH_FRAMES = 30
@@ -620,40 +621,6 @@ def test_viewport_size_keeps_the_region_aspect_within_the_pixel_cap():
     width, height = viewport.preview_size(1920, 1080)
     assert width * height <= viewport.VIEWPORT_MAX_PIXELS and abs(width / height - 16 / 9) < 0.01
     assert viewport.preview_size(0, 0) == (1, 1)
-
-
-class GPUProbe(bpy.types.RenderEngine):
-    """Runs ``GPUProbe.job(engine, depsgraph)`` inside render(): the only GPU context in background mode."""
-
-    bl_idname = "PHRT_TEST_GPU_PROBE"
-    bl_label = "PHRT GPU probe"
-    bl_use_gpu_context = True
-    job = None
-    result = None
-    error = None
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-
-    def render(self, depsgraph):
-        try:
-            type(self).result = type(self).job(self, depsgraph)
-        except Exception as error:  # re-raised by run_on_gpu
-            type(self).error = error
-
-
-def run_on_gpu(scene, job):
-    GPUProbe.job, GPUProbe.result, GPUProbe.error = job, None, None
-    bpy.utils.register_class(GPUProbe)
-    try:
-        scene.render.engine = GPUProbe.bl_idname
-        bpy.ops.render.render()
-    finally:
-        scene.render.engine = "PHRT"
-        bpy.utils.unregister_class(GPUProbe)
-    if GPUProbe.error is not None:
-        raise GPUProbe.error
-    return GPUProbe.result
 
 
 def scene_camera_view(depsgraph, width, height):

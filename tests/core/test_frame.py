@@ -1,0 +1,131 @@
+"""``FrameRenderer`` on hand-built G-buffers, without Blender: the raster half is the numpy
+reference (``lighting.ReferenceRaster``), the G-buffer is ray cast with Embree.
+
+Pins: RASTER never builds an Embree scene; a selected mirror shows the red wall it faces
+where RASTER shows the environment; no lights means no shadow rays; the Candidate pass
+leaves out K = 0 elements; every pass is finite."""
+import numpy as np
+import pytest
+
+from phrt.phrt_addon import shading, shadowmap
+from phrt.phrt_addon.frame import FrameRenderer
+from phrt.phrt_addon.gbuffer import GBuffer, GBufferLayer
+from phrt.phrt_addon.lighting import ReferenceRaster
+from phrt.phrt_addon.scene import Camera, Element, Light, Material, SceneSnapshot, Settings
+from phrt.phrt_addon.tracer import TraceScene
+
+from test_tracer import box, quad
+
+WIDTH, HEIGHT = 96, 72
+
+
+def camera(position, target, fov=np.radians(60.0)):
+    view = shadowmap.look_at(np.subtract(target, position))
+    view[:3, 3] = -(view[:3, :3] @ np.asarray(position, float))
+    return Camera(matrix_world=np.linalg.inv(view), projection=shadowmap.perspective(fov, 0.1, 100.0),
+                  width=WIDTH, height=HEIGHT, clip_start=0.1, clip_end=100.0)
+
+
+def mirror_scene(mode, lights=True, mirror_priority=1.0):
+    """A floor, a mirror patch on it (element 0) facing a red wall, a matte block (element 1)."""
+    materials = [Material("Floor", base_color=(0.5, 0.5, 0.5), roughness=0.8),
+                 Material("Mirror", base_color=(0.95, 0.95, 0.95), metallic=1.0, roughness=0.0),
+                 Material("Red", base_color=(0.9, 0.05, 0.05), roughness=0.9, emission=(2.0, 0.0, 0.0)),
+                 Material("Matte", base_color=(0.3, 0.4, 0.5), roughness=0.9)]
+    elements = [Element("Mirror", "Mirror", priority=mirror_priority, shadows=False, reflections=True,
+                        refractions=False),
+                Element("Block", "Block", priority=1.0, shadows=True, reflections=False, refractions=False)]
+    meshes = [quad("Floor", (0, 0, 0), 20, 20, "+z", material=0),
+              quad("Mirror", (0, 1.0, 0.01), 2.0, 2.0, "+z", material=1, element=0),
+              quad("Wall", (0, 4.0, 1.5), 8.0, 3.0, "-y", material=2),
+              box("Block", (1.5, -0.5, 0.0), (2.3, 0.3, 0.8), material=3, element=1)]
+    scene_lights = [Light("Sun", "SUN", (3.0, 3.0, 3.0), direction=(0.3, 0.4, -1.0))] if lights else []
+    return SceneSnapshot(meshes=meshes, materials=materials, elements=elements, lights=scene_lights,
+                         camera=camera((0.0, -4.0, 2.5), (0.0, 1.0, 0.0)), world_color=(0.05, 0.05, 0.08),
+                         settings=Settings(mode=mode, budget_ms=1e6))
+
+
+def ray_cast_gbuffer(snapshot) -> GBuffer:
+    """The opaque layer by primary rays (what the GPU rasterizes), positions relative to the camera."""
+    scene = TraceScene(threads=1)
+    try:
+        scene.update(snapshot, np.zeros(len(snapshot.materials), bool))
+        origins, directions = snapshot.camera.pixel_rays()
+        origins = origins.reshape(-1, 3)
+        directions = directions.reshape(-1, 3)
+        hits = scene.intersect(scene.to_trace(origins), directions)
+        hit = np.isfinite(hits["t"])
+        idx, material, element, normal, _, _, _ = scene.hit_surfaces(hits, hit)
+    finally:
+        scene.close()
+    layer = GBufferLayer.empty(WIDTH, HEIGHT)
+    layer.albedo = np.zeros((HEIGHT, WIDTH, 3), np.float32)
+    layer.metallic = np.zeros((HEIGHT, WIDTH), np.float32)
+    flat = np.flatnonzero(hit)[np.arange(len(idx))]
+    world = origins[flat] + directions[flat] * hits["t"][flat, None]
+    table = shading.MaterialTable(snapshot.materials)
+    facing = np.where((np.sum(normal * directions[flat], axis=1) > 0)[:, None], -normal, normal)
+    for name, values in (("position", world - snapshot.camera.position), ("normal", facing),
+                         ("albedo", table.base_color[material])):
+        getattr(layer, name).reshape(-1, 3)[flat] = values
+    layer.covered.ravel()[flat] = True
+    layer.roughness.ravel()[flat] = table.roughness[material]
+    layer.metallic.ravel()[flat] = table.metallic[material]
+    layer.material.ravel()[flat] = material
+    layer.element.ravel()[flat] = element
+    depth = np.full((HEIGHT, WIDTH), np.inf, np.float32)
+    depth.ravel()[flat] = (world - snapshot.camera.position) @ snapshot.camera.forward
+    return GBuffer(opaque=layer, transparent=GBufferLayer.empty(WIDTH, HEIGHT), origin=snapshot.camera.position,
+                   view_depth=depth)
+
+
+def render(snapshot, renderer=None):
+    renderer = renderer or FrameRenderer(threads=1)
+    try:
+        gbuffer = ray_cast_gbuffer(snapshot)
+        return renderer.render(snapshot, ReferenceRaster(snapshot, gbuffer)), gbuffer, renderer
+    finally:
+        renderer.close()
+
+
+def test_raster_mode_builds_no_embree_scene_and_traces_no_ray():
+    result, _, renderer = render(mirror_scene("RASTER"))
+    assert renderer.trace_scene is None
+    assert result.stats["rays"] == 0 and result.stats["readback_ms"] == 0.0
+    assert result.stats["n_visible"] == 2 and result.stats["n_selected"] == 0
+
+
+def test_selected_mirror_shows_the_red_wall_where_raster_shows_the_environment():
+    raster, gbuffer, _ = render(mirror_scene("RASTER"))
+    traced, _, _ = render(mirror_scene("RAYTRACE"))
+    mirror = gbuffer.opaque.element == 0
+    assert mirror.sum() > 100
+    assert traced.stats["n_selected"] == 2 and traced.stats["reflection_rays"] > 0
+    raster_mirror = raster.passes.combined[mirror][:, :3]
+    traced_mirror = traced.passes.combined[mirror][:, :3]
+    assert np.median(traced_mirror[:, 0]) > 5 * np.median(traced_mirror[:, 1])  # red
+    assert np.median(raster_mirror[:, 0]) < 2 * np.median(raster_mirror[:, 2])  # the bluish world
+    # Outside the traced elements the two frames agree exactly except where the block's traced
+    # shadow replaced the shadow map.
+    away = ~mirror & (gbuffer.opaque.element != 1)
+    same = np.isclose(raster.passes.combined[away], traced.passes.combined[away], rtol=1e-5, atol=1e-6)
+    assert same.all(axis=-1).mean() > 0.8
+    assert traced.passes.selected[mirror].min() == 1.0
+
+
+def test_no_lights_means_no_shadow_rays_even_with_a_selected_caster():
+    result, _, _ = render(mirror_scene("RAYTRACE", lights=False))
+    assert result.stats["n_selected"] == 2
+    assert result.stats["shadow_rays"] == 0
+
+
+@pytest.mark.parametrize("mode", ["RASTER", "HYBRID", "RAYTRACE"])
+def test_passes_are_finite_and_the_candidate_pass_leaves_out_k_zero(mode):
+    result, gbuffer, _ = render(mirror_scene(mode, mirror_priority=0.0))
+    for name in ("combined", "depth", "normal", "selected", "candidate"):
+        assert np.isfinite(getattr(result.passes, name)).all(), name
+    mirror = gbuffer.opaque.element == 0
+    block = gbuffer.opaque.element == 1
+    assert result.passes.candidate[mirror].max() == 0.0
+    assert result.passes.candidate[block].min() == 1.0
+    assert result.passes.selected[mirror].max() == 0.0
