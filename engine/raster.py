@@ -86,6 +86,7 @@ class GPUFrame:
         self.stats = {}
         self._gbuffer = None
         self._transparent_drawn = False
+        self.read_combined = True  # False: shade() leaves the image on the GPU (the viewport draws it)
 
     # -- protocol --------------------------------------------------------------
     def draw(self):
@@ -149,8 +150,9 @@ class GPUFrame:
             result.append(stored)
         return tuple(result)
 
-    def shade(self, traced) -> np.ndarray:
-        """Deferred lighting and composite with the tracer's results; returns Combined (h, w, 4)."""
+    def shade(self, traced) -> np.ndarray | None:
+        """Deferred lighting and composite with the tracer's results; returns Combined (h, w, 4),
+        or None when ``read_combined`` is off (``combined_texture`` holds it)."""
         gpu = gpu_module()
         start = time.perf_counter()
         uploads = self._upload_traced(gpu, traced)
@@ -462,7 +464,7 @@ class GPUFrame:
         gpu.state.blend_set("NONE")
         self._fullscreen(gpu, "composite", framebuffer, bind)
         self.combined_texture = targets["combined"]
-        return self._read(gpu, framebuffer, 0, "FLOAT", 4)
+        return self._read(gpu, framebuffer, 0, "FLOAT", 4) if self.read_combined else None
 
     # -- read-back ------------------------------------------------------------------
     def _read(self, gpu, framebuffer, slot, kind, channels):

@@ -214,17 +214,19 @@ def view_camera(view_matrix, window_matrix, width, height, ortho=False, clip_sta
                   ortho=bool(ortho), clip_start=float(clip_start), clip_end=float(clip_end))
 
 
-def render_view(depsgraph, camera: Camera, renderer: FrameRenderer):
+def render_view(depsgraph, camera: Camera, renderer: FrameRenderer, read_back: bool = True):
     """Render one PHRT frame of ``depsgraph`` seen by ``camera``; needs a GPU context
     (``view_draw``, or ``render()`` of an engine with ``bl_use_gpu_context``).
-    Returns the ``FrameResult`` (``passes.combined`` is (h, w, 4), bottom row first); its
-    ``gpu_image`` is the GPU texture holding the same image (valid until the next frame)."""
+    Returns the ``FrameResult``: its ``gpu_image`` is the GPU texture holding the image (valid
+    until the next frame is drawn); ``passes.combined`` is the same image read back ((h, w, 4),
+    bottom row first), or None without ``read_back``."""
     start = time.perf_counter()
     stand_in = _ViewCamera(camera.view_matrix, camera.projection, camera.ortho, camera.clip_start, camera.clip_end)
     snapshot = extract.extract(depsgraph, camera_override=stand_in)
     snapshot = dataclasses.replace(snapshot, camera=camera)
     extract_ms = (time.perf_counter() - start) * 1000.0
     gpu_frame = final.rasterize(snapshot)
+    gpu_frame.read_combined = read_back
     result = renderer.render(snapshot, gpu_frame)
     result.stats["extract_ms"] = extract_ms
     result.problems = list(snapshot.problems)
@@ -243,9 +245,8 @@ class ViewportRender:
         self.renderer = FrameRenderer()
         self.stale = True
         self.view_key = None
-        self.pixels = None  # the last frame (numpy), if its GPU texture was replaced
-        self.image = None  # the last frame's GPU texture
-        self.image_frame = None  # RESOURCES.frames_drawn when it was drawn (None: our own copy)
+        self.image = None  # the last frame's GPU texture (a frame target of RESOURCES)
+        self.image_frame = None  # RESOURCES.frames_drawn when it was drawn
         self.size = None
 
     def update(self, depsgraph):
@@ -262,39 +263,32 @@ class ViewportRender:
         view_matrix = np.array(region_3d.view_matrix, dtype=np.float64)
         window_matrix = np.array(region_3d.window_matrix, dtype=np.float64)
         key = (view_matrix.round(6).tobytes(), window_matrix.round(6).tobytes(), width, height)
+        if self.image is not None and self.image_frame != gpu_resources.RESOURCES.frames_drawn:
+            self.stale = True  # another render drew into the frame targets since: draw ours again
         if self.stale or key != self.view_key:
             # Whatever happens, this view is done: a failing scene is not re-rendered on every redraw.
-            self.stale, self.view_key, self.image, self.pixels = False, key, None, None
+            self.stale, self.view_key, self.image = False, key, None
             camera = view_camera(view_matrix, window_matrix, width, height, ortho=not region_3d.is_perspective,
                                  clip_start=getattr(space, "clip_start", 0.01),
                                  clip_end=getattr(space, "clip_end", 1000.0))
             viewport = gpu.state.viewport_get()
             try:
-                result = render_view(depsgraph, camera, self.renderer)
+                result = render_view(depsgraph, camera, self.renderer, read_back=False)
             finally:
                 gpu.state.viewport_set(*viewport)
-            # The frame's own GPU texture is drawn (textures are shared between contexts); the
-            # numpy copy stands in if another render at another resolution replaced that texture.
+            # The frame's own GPU texture is drawn: nothing is read back (textures are shared
+            # between the render and the window's context).
             self.image = result.gpu_image
             self.image_frame = gpu_resources.RESOURCES.frames_drawn
-            self.pixels = np.ascontiguousarray(np.nan_to_num(result.passes.combined), dtype=np.float32).ravel()
             self.size = (width, height)
             engine.update_stats("PHRT", f"{result.stats['total_ms']:.0f} ms, "
                                         f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
-        if self.pixels is None:
+        if self.image is None:
             return
-        texture = self.image
-        if texture is not None and self.image_frame is not None and \
-                self.image_frame != gpu_resources.RESOURCES.frames_drawn:
-            texture = None  # another frame was drawn into the targets since
-        if texture is None:
-            buffer = gpu.types.Buffer("FLOAT", self.pixels.size, self.pixels)
-            texture = self.image = gpu.types.GPUTexture(self.size, format="RGBA16F", data=buffer)
-            self.image_frame = None  # our own copy: valid until the next render
         gpu.state.blend_set("ALPHA_PREMULT")
         engine.bind_display_space_shader(depsgraph.scene)
         try:
-            draw_texture_2d(texture, (0, 0), region.width, region.height)
+            draw_texture_2d(self.image, (0, 0), region.width, region.height)
         finally:
             engine.unbind_display_space_shader()
             gpu.state.blend_set("NONE")

@@ -55,7 +55,7 @@ class RasterFrame(Protocol):
 
     def gbuffer(self) -> GBuffer: ...
 
-    def shade(self, traced: "TracedTerms | None") -> np.ndarray: ...
+    def shade(self, traced: "TracedTerms | None") -> np.ndarray | None: ...
 
 
 @dataclass
@@ -72,7 +72,7 @@ class TracedTerms:
 
 @dataclass
 class FramePasses:
-    combined: np.ndarray  # (h,w,4) float32, linear, alpha 1
+    combined: np.ndarray | None  # (h,w,4) float32, linear, alpha 1; None if left on the GPU
     depth: np.ndarray  # (h,w) float32 view-axis distance; 1e10 where background
     normal: np.ndarray  # (h,w,3) float32
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
@@ -269,9 +269,10 @@ class FrameRenderer:
         candidate_flags = np.r_[candidate, False]
         selected_flags = np.r_[np.asarray(selected, bool), False]
         depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, 1e10).astype(np.float32)
-        combined = np.ascontiguousarray(combined, dtype=np.float32)
-        combined[..., :3] = shading.finite(combined[..., :3])
-        combined[..., 3] = 1.0
+        if combined is not None:  # None: the image stayed on the GPU (the viewport draws it there)
+            combined = np.ascontiguousarray(combined, dtype=np.float32)
+            combined[..., :3] = shading.finite(combined[..., :3])
+            combined[..., 3] = 1.0
         return FramePasses(
             combined=combined,
             depth=depth,

@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
-from phrt.engine import final, replay, viewport  # noqa: E402
+from phrt.engine import final, gpu_resources, replay, viewport  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
 from gpu_probe import run_on_gpu  # noqa: E402
@@ -680,7 +680,7 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
                         if update:
                             view_render.update(depsgraph)
                         view_render.draw(engine, context, depsgraph)
-                        textures.append(view_render.pixels)
+                        textures.append((view_render.image, gpu_resources.RESOURCES.frames_drawn))
                 buffer = gpu.types.Buffer("FLOAT", WIDTH * HEIGHT * 4)
                 framebuffer.read_color(0, 0, WIDTH, HEIGHT, 4, 0, "FLOAT", data=buffer)
                 drawn = np.asarray(buffer).reshape(HEIGHT, WIDTH, 4).copy()
@@ -689,7 +689,8 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
         return drawn, textures
 
     drawn, textures = run_on_gpu(scene, job)
-    assert textures[0] is textures[1]  # nothing changed: the cached image is drawn again (no GPU object kept)
-    assert textures[2] is not textures[1]  # view_update: rendered again
+    assert textures[0][0] is not None
+    assert textures[0] == textures[1]  # nothing changed: the same GPU image is drawn again, no render
+    assert textures[2][1] == textures[1][1] + 1  # view_update: rendered again
     image = drawn[::-1, :, :3]
-    assert np.abs(image - rgb(final_render)).mean() < 0.01  # half-float texture of the same frame
+    assert np.abs(image - rgb(final_render)).mean() < 0.01  # half-float target of the same frame
