@@ -12,6 +12,7 @@ import math
 import bpy
 import numpy as np
 
+from .. import compat
 from .geometry import MeshData
 
 # Edges whose faces meet at more than this angle are shaded sharp (the
@@ -193,8 +194,6 @@ def keyframe_every_frame(obj: bpy.types.Object, first_frame: int, locations: np.
                          rotations: np.ndarray) -> None:
     """Key ``location`` and ``rotation_euler`` on every frame from
     ``first_frame`` (linear interpolation between keys one frame apart)."""
-    from bpy_extras import anim_utils
-
     obj.rotation_mode = "XYZ"
     obj.location = locations[0]
     obj.rotation_euler = rotations[0]
@@ -203,7 +202,7 @@ def keyframe_every_frame(obj: bpy.types.Object, first_frame: int, locations: np.
     animation = obj.animation_data_create()
     animation.action = action
     animation.action_slot = slot
-    channelbag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
+    channelbag = compat.ensure_channelbag(action, slot)
     frames = first_frame + np.arange(len(locations), dtype=np.float64)
     linear = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value
     for data_path, values in (("location", locations), ("rotation_euler", rotations)):

@@ -18,6 +18,7 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 
 import phrt  # noqa: E402
+from phrt import compat  # noqa: E402
 from phrt.engine import extract, final  # noqa: E402
 from phrt.phrt_addon import metrics, shading  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
@@ -62,7 +63,7 @@ def render(scene, mode, name, tmp_path, engine="PHRT"):
     if engine == "PHRT":
         scene.phrt.mode = mode
     settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
+    compat.set_image_format(settings, compat.MULTILAYER_EXR)
     settings.color_depth = "32"
     path = Path(tmp_path) / f"{name}-{mode}.exr"
     scene.render.filepath = str(path)
