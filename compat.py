@@ -7,6 +7,9 @@ sample scenes and the tests calls these functions instead of testing versions
 itself.  Each difference is detected by the feature, not the version number, and
 each function says which versions do what.
 """
+import gzip
+import re
+
 import bpy
 
 # Blender's own format ids are not the same on every version: these are ours.
@@ -61,3 +64,41 @@ def ensure_channelbag(action, slot):
     layer = action.layers[0] if len(action.layers) else action.layers.new("Layer")
     strip = layer.strips[0] if len(layer.strips) else layer.strips.new(type="KEYFRAME")
     return strip.channelbag(slot, ensure=True)
+
+
+def new_fcurve(channelbag, data_path, index, group_name):
+    """A new F-curve of ``channelbag`` in the channel group ``group_name`` (made if missing).
+    5.0 added a ``group_name`` argument to ``ActionChannelbagFCurves.new``; 4.5 lacks it, so
+    the group is assigned after, which both versions accept."""
+    group = channelbag.groups.get(group_name) or channelbag.groups.new(group_name)
+    curve = channelbag.fcurves.new(data_path, index=index)
+    curve.group = group
+    return curve
+
+
+# "BLENDER-v405" (4.x: pointer size, endianness, version 405 = 4.5) or
+# "BLENDER17-01v0502" (5.0+: header size, format 01, version 0502 = 5.2).
+_BLEND_HEADER = re.compile(rb"BLENDER(?:[-_][vV](\d{3})|\d\d-\d\d[vV](\d{4}))")
+
+
+def blend_file_version(path):
+    """(major, minor) of the Blender that saved the .blend file ``path``, read from its
+    header (plain, gzip or zstd compressed), or None when the header is not a .blend's.
+
+    A file saved by a newer Blender opens in 4.5 and 5.0 only "with loss of data" (they
+    warn so, and report leaked memory at exit), so the command line rebuilds a sample
+    scene saved by another version instead of opening it."""
+    with open(path, "rb") as handle:
+        head = handle.read(32)
+        if head.startswith(b"\x28\xb5\x2f\xfd"):  # zstd: Blender 3.0+ compression
+            import zstandard  # a dependency of the bpy module, bundled with Blender
+            handle.seek(0)
+            head = zstandard.ZstdDecompressor().stream_reader(handle).read(32)
+        elif head.startswith(b"\x1f\x8b"):  # gzip: before 3.0
+            handle.seek(0)
+            head = gzip.GzipFile(fileobj=handle).read(32)
+    match = _BLEND_HEADER.match(head)
+    if match is None:
+        return None
+    number = int(match.group(1) or match.group(2))
+    return divmod(number, 100)

@@ -207,7 +207,7 @@ def keyframe_every_frame(obj: bpy.types.Object, first_frame: int, locations: np.
     linear = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value
     for data_path, values in (("location", locations), ("rotation_euler", rotations)):
         for index in range(3):
-            curve = channelbag.fcurves.new(data_path, index=index, group_name="Object Transforms")
+            curve = compat.new_fcurve(channelbag, data_path, index, "Object Transforms")
             points = curve.keyframe_points
             points.add(len(frames))
             co = np.stack((frames, values[:, index]), axis=1).astype(np.float32)
