@@ -44,7 +44,8 @@ extension: $(STAMP)
 # checkout installed in editable mode; `make test-compat COMPAT_VERSIONS=4.5`
 # runs one.  A missing Python is found by tools/find_python (PATH, pyenv, uv) or
 # given as `make test-compat PYTHON_3.13=/path/to/python3.13`.
-COMPAT_VERSIONS := 4.5 5.0 5.2
+COMPAT_MATRIX := 4.5 5.0 5.2
+COMPAT_VERSIONS := $(COMPAT_MATRIX)
 COMPAT_BPY_4.5 := 4.5.15
 COMPAT_PYTHON_4.5 := 3.11
 COMPAT_NUMPY_4.5 := 1.26.4
@@ -58,7 +59,7 @@ COMPAT_NUMPY_5.2 := 2.5.5
 # requirements.txt with this version's bpy and numpy; a venv made by another
 # Python is made anew.
 .venv-blender-%/.phrt-installed: requirements.txt pyproject.toml Makefile
-	@test -n "$(COMPAT_BPY_$*)" || { echo "make: Blender $* is not in the matrix: use one of $(COMPAT_VERSIONS)" >&2; exit 2; }
+	@test -n "$(COMPAT_BPY_$*)" || { echo "make: Blender $* is not in the matrix: use one of $(COMPAT_MATRIX)" >&2; exit 2; }
 	@set -e; python="$(PYTHON_$(COMPAT_PYTHON_$*))"; \
 	if [ -z "$$python" ]; then python=$$(tools/find_python $(COMPAT_PYTHON_$*)); fi; \
 	if [ -x $(@D)/bin/python ] && ! $(@D)/bin/python -c 'import sys; sys.exit(sys.version_info[:2] != ($(subst .,$(comma),$(COMPAT_PYTHON_$*))))'; then \

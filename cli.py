@@ -104,28 +104,27 @@ def _progress(stream):
 
 
 @contextlib.contextmanager
-def _quiet_stdout(to_stderr=False):
-    """Blender prints 'Saved: ...' per frame on stdout; keep stdout for our summary lines.
-    ``to_stderr`` sends what Blender prints to stderr instead of discarding it."""
+def _quiet_stdout():
+    """Blender prints 'Saved: ...' per frame on stdout; keep stdout for our summary lines."""
     sys.stdout.flush()
     saved = os.dup(1)
-    target = os.dup(2) if to_stderr else os.open(os.devnull, os.O_WRONLY)
-    os.dup2(target, 1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
     try:
         yield
     finally:
         sys.stdout.flush()
         os.dup2(saved, 1)
-        os.close(target)
+        os.close(devnull)
         os.close(saved)
 
 
 def _import_blender():
-    """Start Blender (import bpy) with its start-up log on stderr: Blender 5.x prints
+    """Start Blender (import bpy) without its start-up log: Blender 5.x prints
     'color_management | Using OCIO=...' on stdout when the OCIO variable is set (5.2 sets
-    it for its child processes), 4.5 its OpenColorIO errors."""
+    it for its child processes).  Not on stderr either, where bad input gets one line."""
     if "bpy" not in sys.modules:
-        with _quiet_stdout(to_stderr=True):
+        with _quiet_stdout():
             import bpy  # noqa: F401
 
 
@@ -258,11 +257,13 @@ def command_report(args):
     return 0
 
 
-def _exit_log_to_stderr():
-    """What Blender prints while the process ends goes to stderr: 4.5 and 5.0 report
-    'Not freed memory blocks' on stdout after opening a file saved by a newer Blender."""
+def _quiet_exit():
+    """Nothing Blender prints on stdout while the process ends reaches it: 4.5 and 5.0
+    report 'Not freed memory blocks' there after opening a file saved by a newer Blender."""
     sys.stdout.flush()
-    os.dup2(2, 1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.close(devnull)
 
 
 def main(argv=None):
@@ -279,7 +280,7 @@ def main(argv=None):
         return 2
     finally:
         if as_program and "bpy" in sys.modules:
-            _exit_log_to_stderr()
+            _quiet_exit()
 
 
 if __name__ == "__main__":

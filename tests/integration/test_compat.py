@@ -97,6 +97,13 @@ def test_phrt_render_exits_0_with_only_its_summary_on_stdout(tmp_path):
     assert passes["Combined"].shape == (48, 64, 4)
 
 
+def test_bad_input_gets_one_line_on_stderr_even_when_blender_logs_at_start_up(tmp_path):
+    env = dict(os.environ, OCIO=str(this_blenders_ocio_config()))
+    status, stdout, stderr = run([str(PHRT), "render", str(tmp_path / "missing.blend")], tmp_path, env=env)
+    assert status == 2 and stdout == ""
+    assert len(stderr) == 1 and stderr[0].startswith("phrt: error: no such file"), stderr
+
+
 def test_blend_saved_by_a_newer_blender_renders_with_a_warning_on_stderr(tmp_path):
     blend = saved_scene(tmp_path, "newer.blend")
     data = bytearray(blend.read_bytes())
@@ -182,7 +189,7 @@ def test_failed_register_leaves_nothing_registered(monkeypatch):
 
 def test_manifest_minimum_and_readme_say_what_the_matrix_runs():
     makefile = (ROOT / "Makefile").read_text()
-    matrix = re.search(r"^COMPAT_VERSIONS := (.+)$", makefile, re.MULTILINE).group(1).split()
+    matrix = re.search(r"^COMPAT_MATRIX := (.+)$", makefile, re.MULTILINE).group(1).split()
     bpy_pins = dict(re.findall(r"^COMPAT_BPY_(\S+) := (\S+)$", makefile, re.MULTILINE))
     assert sorted(bpy_pins) == sorted(matrix)
     assert all(bpy_pins[version].startswith(version + ".") for version in matrix)
