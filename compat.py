@@ -56,6 +56,24 @@ def restore_image_format(image_settings, state):
             pass
 
 
+def node_tree_of(datablock):
+    """The node tree Blender renders a material or world with, or None.  From 5.0 a
+    material or world always uses its node tree (``use_nodes`` is deprecated and warns);
+    on 4.5 only when ``use_nodes`` is on."""
+    if bpy.app.version >= (5, 0, 0):
+        return datablock.node_tree
+    return datablock.node_tree if datablock.use_nodes else None
+
+
+def ensure_node_tree(datablock):
+    """The node tree of a new material or world, made on 4.5 (which creates both without
+    one; ``use_nodes = True`` adds the Principled BSDF or Background node) and already
+    there on 5.0+."""
+    if node_tree_of(datablock) is None:
+        datablock.use_nodes = True
+    return datablock.node_tree
+
+
 def ensure_channelbag(action, slot):
     """The F-curve container of ``slot`` in ``action`` (a layered action, Blender 4.4+),
     made if missing.  5.0 added ``bpy_extras.anim_utils.action_ensure_channelbag_for_slot``

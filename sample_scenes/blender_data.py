@@ -53,9 +53,7 @@ class SceneData:
         if name in self.materials:
             return self.materials[name]
         mat = bpy.data.materials.new(name)
-        if mat.node_tree is None:   # Blender < 5.0 creates materials without nodes
-            mat.use_nodes = True
-        nodes = mat.node_tree.nodes
+        nodes = compat.ensure_node_tree(mat).nodes
         bsdf = nodes.get("Principled BSDF")
         color = tuple(base_color) + (1.0,) * (4 - len(base_color))
         bsdf.inputs["Base Color"].default_value = color
@@ -138,9 +136,7 @@ class SceneData:
 
     def sky(self, name: str, color, strength: float) -> None:
         world = bpy.data.worlds.new(name)
-        if world.node_tree is None:
-            world.use_nodes = True
-        background = world.node_tree.nodes.get("Background")
+        background = compat.ensure_node_tree(world).nodes.get("Background")
         background.inputs["Color"].default_value = tuple(color) + (1.0,)
         background.inputs["Strength"].default_value = strength
         world.color = color

@@ -162,6 +162,18 @@ def test_image_format_is_set_and_restored_on_this_version():
         compat.set_image_format(settings, "TIFF")
 
 
+def test_new_materials_and_worlds_get_the_node_tree_blender_renders_with():
+    material = bpy.data.materials.new("CompatMaterial")
+    tree = compat.ensure_node_tree(material)
+    assert tree.nodes.get("Principled BSDF") is not None
+    assert compat.node_tree_of(material) == tree
+    world = bpy.data.worlds.new("CompatWorld")
+    assert compat.ensure_node_tree(world).nodes.get("Background") is not None
+    if bpy.app.version < (5, 0, 0):  # 4.5 can still render a material without its nodes
+        material.use_nodes = False
+        assert compat.node_tree_of(material) is None
+
+
 def test_unregister_is_a_no_op_when_not_registered():
     phrt.unregister()
     try:
