@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast bench extension scenes clean
+.PHONY: demo test test-fast test-compat bench extension scenes clean
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -37,6 +37,54 @@ scenes: $(STAMP)
 # One extension zip per platform, with the wheels it needs (never committed).
 extension: $(STAMP)
 	$(PY) tools/build_extension.py --platforms all --out dist
+
+# The Blender versions PHRT supports (README "Blender versions"): for each, the bpy
+# wheel, its Python and the numpy it allows.  `make test-compat` runs the whole
+# suite once per version, each in its own reused .venv-blender-X.Y with this
+# checkout installed in editable mode; `make test-compat COMPAT_VERSIONS=4.5`
+# runs one.  A missing Python is found by tools/find_python (PATH, pyenv, uv) or
+# given as `make test-compat PYTHON_3.13=/path/to/python3.13`.
+COMPAT_MATRIX := 4.5 5.0 5.2
+COMPAT_VERSIONS := $(COMPAT_MATRIX)
+COMPAT_BPY_4.5 := 4.5.15
+COMPAT_PYTHON_4.5 := 3.11
+COMPAT_NUMPY_4.5 := 1.26.4
+COMPAT_BPY_5.0 := 5.0.1
+COMPAT_PYTHON_5.0 := 3.11
+COMPAT_NUMPY_5.0 := 1.26.4
+COMPAT_BPY_5.2 := 5.2.3
+COMPAT_PYTHON_5.2 := 3.13
+COMPAT_NUMPY_5.2 := 2.5.5
+
+# requirements.txt with this version's bpy and numpy; a venv made by another
+# Python is made anew.
+.venv-blender-%/.phrt-installed: requirements.txt pyproject.toml Makefile
+	@test -n "$(COMPAT_BPY_$*)" || { echo "make: Blender $* is not in the matrix: use one of $(COMPAT_MATRIX)" >&2; exit 2; }
+	@set -e; python="$(PYTHON_$(COMPAT_PYTHON_$*))"; \
+	if [ -z "$$python" ]; then python=$$(tools/find_python $(COMPAT_PYTHON_$*)); fi; \
+	if [ -x $(@D)/bin/python ] && ! $(@D)/bin/python -c 'import sys; sys.exit(sys.version_info[:2] != ($(subst .,$(comma),$(COMPAT_PYTHON_$*))))'; then \
+		echo "$(@D) was made by another Python: making it anew with $$python"; rm -rf $(@D); fi; \
+	test -x $(@D)/bin/python || { echo "$$python -m venv $(@D)"; "$$python" -m venv $(@D); }
+	$(@D)/bin/python -m pip install -q --upgrade pip
+	sed -e 's/^bpy==.*/bpy==$(COMPAT_BPY_$*)/' -e 's/^numpy==.*/numpy==$(COMPAT_NUMPY_$*)/' requirements.txt \
+		> $(@D)/requirements.txt
+	$(@D)/bin/python -m pip install -q -r $(@D)/requirements.txt
+	$(@D)/bin/python -m pip install -q --no-deps -e .
+	@touch $@
+
+comma := ,
+
+# Every version is run even when one fails; the summary gives each result and wall time.
+test-compat: $(foreach v,$(COMPAT_VERSIONS),.venv-blender-$(v)/.phrt-installed)
+	@failed=""; summary=""; \
+	for v in $(COMPAT_VERSIONS); do \
+		echo "== Blender $$v: .venv-blender-$$v/bin/python -m pytest -q"; \
+		start=$$(date +%s); \
+		if .venv-blender-$$v/bin/python -m pytest -q; then result=passed; else result=FAILED; failed="$$failed $$v"; fi; \
+		summary="$$summary\n  Blender $$v (bpy $$(.venv-blender-$$v/bin/python -c 'import importlib.metadata as m; print(m.version("bpy"))'), Python $$(.venv-blender-$$v/bin/python -c 'import platform; print(platform.python_version())')): $$result in $$(( $$(date +%s) - start )) s"; \
+	done; \
+	printf "== make test-compat$$summary\n"; \
+	test -z "$$failed" || { echo "make test-compat: failed on Blender$$failed" >&2; exit 1; }
 
 clean:
 	rm -rf out dist wheels .pytest_cache

@@ -119,6 +119,15 @@ def _quiet_stdout():
         os.close(saved)
 
 
+def _import_blender():
+    """Start Blender (import bpy) without its start-up log: Blender 5.x prints
+    'color_management | Using OCIO=...' on stdout when the OCIO variable is set (5.2 sets
+    it for its child processes).  Not on stderr either, where bad input gets one line."""
+    if "bpy" not in sys.modules:
+        with _quiet_stdout():
+            import bpy  # noqa: F401
+
+
 def _blender():
     """Import bpy and register the add-on from this package (idempotent)."""
     import bpy
@@ -129,11 +138,16 @@ def _blender():
 
 
 def _sample_is_stale(blend_path):
-    """A sample .blend is rebuilt when missing or older than any of its generator's modules."""
+    """A sample .blend is rebuilt when missing, older than any of its generator's modules
+    or saved by another Blender version."""
     if not blend_path.exists():
         return True
     built = blend_path.stat().st_mtime
-    return any(module.stat().st_mtime > built for module in SAMPLE_DIR.glob("*.py"))
+    if any(module.stat().st_mtime > built for module in SAMPLE_DIR.glob("*.py")):
+        return True
+    import bpy
+    from . import compat
+    return compat.blend_file_version(blend_path) != tuple(bpy.app.version[:2])
 
 
 def load_scene(name_or_path):
@@ -146,7 +160,8 @@ def load_scene(name_or_path):
         if _sample_is_stale(path):
             with _quiet_stdout():
                 generate.write_scene(name_or_path, SAMPLE_DIR)
-        bpy.ops.wm.open_mainfile(filepath=str(path))
+        with _quiet_stdout():
+            bpy.ops.wm.open_mainfile(filepath=str(path))
         return name_or_path
     if not path.exists():
         raise UserError(f"no such file or sample scene '{name_or_path}': give a .blend file or one of "
@@ -158,6 +173,11 @@ def load_scene(name_or_path):
     if magic not in (b"BLENDER",) and not magic.startswith(b"\x1f\x8b") and not magic.startswith(b"\x28\xb5\x2f\xfd"):
         raise UserError(f"'{name_or_path}' is not a valid .blend file (bad header)")
     bpy = _blender()
+    from . import compat
+    saved_by = compat.blend_file_version(path)
+    if saved_by is not None and saved_by > tuple(bpy.app.version[:2]):
+        print(f"phrt: warning: '{name_or_path}' was saved by Blender {saved_by[0]}.{saved_by[1]}, newer than this "
+              f"Blender {bpy.app.version_string}: expect loss of data (save it from this version)", file=sys.stderr)
     try:
         with _quiet_stdout():
             bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
@@ -237,15 +257,30 @@ def command_report(args):
     return 0
 
 
+def _quiet_exit():
+    """Nothing Blender prints on stdout while the process ends reaches it: 4.5 and 5.0
+    report 'Not freed memory blocks' there after opening a file saved by a newer Blender."""
+    sys.stdout.flush()
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.close(devnull)
+
+
 def main(argv=None):
+    as_program = argv is None
     argv = sys.argv[1:] if argv is None else argv
     try:
         args = build_parser().parse_args(argv)
+        if args.command != "report":  # every other command runs Blender
+            _import_blender()
         command = {"scenes": command_scenes, "render": command_render, "report": command_report}[args.command]
         return command(args)
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)
         return 2
+    finally:
+        if as_program and "bpy" in sys.modules:
+            _quiet_exit()
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from pathlib import Path
 
 
 def _render_showcase(bpy, out: Path):
+    from . import compat
     from .engine import final
     from .sample_scenes import showcase
     scene = showcase.build_showcase(640, 480)
@@ -29,10 +30,9 @@ def _render_showcase(bpy, out: Path):
     timings = []
     for image_format, suffix in (("PNG", "png"), ("EXR", "exr")):
         if image_format == "PNG":
-            settings.media_type = "IMAGE"
-            settings.file_format = "PNG"
+            compat.set_image_format(settings, compat.PNG)
         else:
-            settings.media_type = "MULTI_LAYER_IMAGE"
+            compat.set_image_format(settings, compat.MULTILAYER_EXR)
             settings.color_depth = "32"
         render.use_file_extension = True
         render.filepath = str(out / "showcase")

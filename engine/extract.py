@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import compat
 from ..phrt_addon.scene import (Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings,
                                 geometry_key)
 
@@ -99,14 +100,6 @@ def _image_pixels(image, problems):
         return None, None
 
 
-def _uses_nodes(datablock) -> bool:
-    """Blender 5.0 always uses node trees (``use_nodes`` is deprecated); 4.x may not."""
-    import bpy
-    if bpy.app.version >= (5, 0, 0):
-        return datablock.node_tree is not None
-    return bool(datablock.use_nodes)
-
-
 def _socket_value(node, name, default):
     socket = node.inputs.get(name)
     if socket is None:
@@ -128,7 +121,7 @@ def read_material(material, problems) -> Material:
         metallic=float(material.metallic),
         roughness=float(material.roughness),
     )
-    tree = material.node_tree if _uses_nodes(material) else None
+    tree = compat.node_tree_of(material)
     if tree is None:
         return result
     principled = next((node for node in tree.nodes if node.type == "BSDF_PRINCIPLED"), None)
@@ -309,8 +302,9 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
     world_color = (0.05, 0.05, 0.05)
     if world is not None:
         world_color = tuple(world.color[:3])
-        if _uses_nodes(world) and world.node_tree is not None:
-            background = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
+        tree = compat.node_tree_of(world)
+        if tree is not None:
+            background = next((n for n in tree.nodes if n.type == "BACKGROUND"), None)
             if background is not None:
                 color = background.inputs["Color"].default_value
                 strength = background.inputs["Strength"].default_value

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import bpy
 
+from .. import compat
 from ..phrt_addon import runlog
 from . import extract, final
 
@@ -86,16 +87,11 @@ def parse_frames(text, default_range) -> tuple[int, int]:
 def _set_image_format(scene, images):
     settings = scene.render.image_settings
     if images == "exr":
-        if hasattr(settings, "media_type"):  # Blender 5.0+
-            settings.media_type = "MULTI_LAYER_IMAGE"
-        else:
-            settings.file_format = "OPEN_EXR_MULTILAYER"
+        compat.set_image_format(settings, compat.MULTILAYER_EXR)
         settings.exr_codec = "ZIP"
         settings.color_depth = "32"
     elif images == "png":
-        if hasattr(settings, "media_type"):
-            settings.media_type = "IMAGE"
-        settings.file_format = "PNG"
+        compat.set_image_format(settings, compat.PNG)
         settings.color_mode = "RGBA"
         settings.color_depth = "8"
 
@@ -164,10 +160,7 @@ class SteppedReplay:
         self._saved = {"camera": scene.camera, "frame": scene.frame_current, "filepath": render.filepath,
                        "res": (render.resolution_x, render.resolution_y, render.resolution_percentage),
                        "engine": render.engine, "use_ext": render.use_file_extension}
-        self._image_saved = {key: getattr(render.image_settings, key) for key in
-                             ("file_format", "color_depth", "color_mode") if hasattr(render.image_settings, key)}
-        if hasattr(render.image_settings, "media_type"):
-            self._image_saved = {"media_type": render.image_settings.media_type, **self._image_saved}
+        self._image_saved = compat.image_format_state(render.image_settings)
         scene.camera = camera
         render.engine = "PHRT"
         if resolution is not None:
@@ -258,11 +251,7 @@ class SteppedReplay:
         render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
         render.engine = saved["engine"]
         render.use_file_extension = saved["use_ext"]
-        for key, value in self._image_saved.items():
-            try:
-                setattr(render.image_settings, key, value)
-            except (TypeError, AttributeError):
-                pass
+        compat.restore_image_format(render.image_settings, self._image_saved)
 
 
 

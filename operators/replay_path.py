@@ -34,9 +34,8 @@ IMAGE_ITEMS = (
     ("PNG", "PNG", "8-bit sRGB PNG of the combined image", 1),
     ("NONE", "None", "Logs only, no images", 2),
 )
-# '//' (relative to the .blend file) must be declared on Blender 4.5+; older versions accept it silently.
-BLEND_RELATIVE_PATH = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
-                       if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
+# '//' (relative to the .blend file) must be declared from Blender 4.5 (the oldest supported) on.
+BLEND_RELATIVE_PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"}
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
                       "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}

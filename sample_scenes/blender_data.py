@@ -12,6 +12,7 @@ import math
 import bpy
 import numpy as np
 
+from .. import compat
 from .geometry import MeshData
 
 # Edges whose faces meet at more than this angle are shaded sharp (the
@@ -52,9 +53,7 @@ class SceneData:
         if name in self.materials:
             return self.materials[name]
         mat = bpy.data.materials.new(name)
-        if mat.node_tree is None:   # Blender < 5.0 creates materials without nodes
-            mat.use_nodes = True
-        nodes = mat.node_tree.nodes
+        nodes = compat.ensure_node_tree(mat).nodes
         bsdf = nodes.get("Principled BSDF")
         color = tuple(base_color) + (1.0,) * (4 - len(base_color))
         bsdf.inputs["Base Color"].default_value = color
@@ -137,9 +136,7 @@ class SceneData:
 
     def sky(self, name: str, color, strength: float) -> None:
         world = bpy.data.worlds.new(name)
-        if world.node_tree is None:
-            world.use_nodes = True
-        background = world.node_tree.nodes.get("Background")
+        background = compat.ensure_node_tree(world).nodes.get("Background")
         background.inputs["Color"].default_value = tuple(color) + (1.0,)
         background.inputs["Strength"].default_value = strength
         world.color = color
@@ -193,8 +190,6 @@ def keyframe_every_frame(obj: bpy.types.Object, first_frame: int, locations: np.
                          rotations: np.ndarray) -> None:
     """Key ``location`` and ``rotation_euler`` on every frame from
     ``first_frame`` (linear interpolation between keys one frame apart)."""
-    from bpy_extras import anim_utils
-
     obj.rotation_mode = "XYZ"
     obj.location = locations[0]
     obj.rotation_euler = rotations[0]
@@ -203,12 +198,12 @@ def keyframe_every_frame(obj: bpy.types.Object, first_frame: int, locations: np.
     animation = obj.animation_data_create()
     animation.action = action
     animation.action_slot = slot
-    channelbag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
+    channelbag = compat.ensure_channelbag(action, slot)
     frames = first_frame + np.arange(len(locations), dtype=np.float64)
     linear = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value
     for data_path, values in (("location", locations), ("rotation_euler", rotations)):
         for index in range(3):
-            curve = channelbag.fcurves.new(data_path, index=index, group_name="Object Transforms")
+            curve = compat.new_fcurve(channelbag, data_path, index, "Object Transforms")
             points = curve.keyframe_points
             points.add(len(frames))
             co = np.stack((frames, values[:, index]), axis=1).astype(np.float32)

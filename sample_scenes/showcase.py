@@ -12,6 +12,8 @@ import math
 import bmesh
 import bpy
 
+from .. import compat
+
 
 def empty_scene(width=320, height=240):
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -34,9 +36,7 @@ def empty_scene(width=320, height=240):
 def principled(name, color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5, transmission=0.0, ior=1.45,
                alpha=1.0, emission=None):
     material = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        material.use_nodes = True  # always on (and deprecated) from Blender 5.0
-    bsdf = material.node_tree.nodes.get("Principled BSDF")
+    bsdf = compat.ensure_node_tree(material).nodes.get("Principled BSDF")
     bsdf.inputs["Base Color"].default_value = (*color, 1.0)
     bsdf.inputs["Metallic"].default_value = metallic
     bsdf.inputs["Roughness"].default_value = roughness

@@ -26,10 +26,11 @@ def blender():
 @pytest.fixture
 def render_exr(blender, tmp_path):
     """Render the current scene with PHRT to a multilayer EXR and return its path."""
+    from phrt import compat
     def render(name="frame"):
         scene = blender.context.scene
         settings = scene.render.image_settings
-        settings.media_type = "MULTI_LAYER_IMAGE"
+        compat.set_image_format(settings, compat.MULTILAYER_EXR)
         settings.color_depth = "32"
         scene.render.use_file_extension = True
         scene.render.filepath = str(tmp_path / name)

@@ -4,7 +4,8 @@ import OpenEXR
 
 
 def read_passes(path) -> dict:
-    """{pass name: float32 (h, w) or (h, w, c)} from Blender 5.0's one-part-per-pass EXR."""
+    """{pass name: float32 (h, w) or (h, w, c)} from Blender 5.x's one-part-per-pass EXR
+    or 4.5's single part (channels are 'ViewLayer.<pass>.<component>' in both)."""
     passes = {}
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         for part in exr.parts:

@@ -18,6 +18,7 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 
 import phrt  # noqa: E402
+from phrt import compat  # noqa: E402
 from phrt.engine import extract, final  # noqa: E402
 from phrt.phrt_addon import metrics, shading  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
@@ -42,18 +43,21 @@ def fresh_caches():
 # -- rendering and reading back ------------------------------------------------------------------
 
 def read_passes(path):
-    """Every pass of a Blender 5.0 multilayer EXR: {'Combined': (h,w,4), 'Depth': (h,w,1), ...}, top row first."""
+    """Every pass of a multilayer EXR: {'Combined': (h,w,4), 'Depth': (h,w,1), ...}, top row first.
+    Blender 5.x writes one part per pass, 4.5 one part with every pass: channels are
+    named 'ViewLayer.<pass>.<component>' in both."""
     import OpenEXR
 
-    passes = {}
+    by_pass = {}
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         for part in exr.parts:
-            name = part.name().split(".", 1)[1]
-            channels = sorted(part.channels.items())
-            order = {"R": 0, "G": 1, "B": 2, "A": 3, "X": 0, "Y": 1, "Z": 2}
-            channels.sort(key=lambda item: order.get(item[0].rsplit(".", 1)[1], 9))
-            passes[name] = np.stack([np.asarray(c.pixels, np.float32) for _, c in channels], axis=-1)
-    return passes
+            for channel_name, channel in part.channels.items():
+                pass_name, component = channel_name.split(".", 1)[1].rsplit(".", 1)
+                by_pass.setdefault(pass_name, []).append((component, np.asarray(channel.pixels, np.float32)))
+    order = {"R": 0, "G": 1, "B": 2, "A": 3, "X": 0, "Y": 1, "Z": 2}
+    return {name: np.stack([pixels for _, pixels in sorted(channels, key=lambda item: order.get(item[0], 9))],
+                           axis=-1)
+            for name, channels in by_pass.items()}
 
 
 def render(scene, mode, name, tmp_path, engine="PHRT"):
@@ -62,7 +66,7 @@ def render(scene, mode, name, tmp_path, engine="PHRT"):
     if engine == "PHRT":
         scene.phrt.mode = mode
     settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
+    compat.set_image_format(settings, compat.MULTILAYER_EXR)
     settings.color_depth = "32"
     path = Path(tmp_path) / f"{name}-{mode}.exr"
     scene.render.filepath = str(path)

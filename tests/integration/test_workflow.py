@@ -18,6 +18,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
+from phrt import compat  # noqa: E402
 from phrt.engine import final, gpu_resources, replay, viewport  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
@@ -65,7 +66,7 @@ def read_passes(path) -> dict:
 
 def render_passes(scene, path) -> dict:
     settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
+    compat.set_image_format(settings, compat.MULTILAYER_EXR)
     settings.color_depth = "32"
     scene.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
