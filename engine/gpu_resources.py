@@ -245,6 +245,11 @@ class GPUResources:
         "opaque_light": "RGBA32F", "transparent_light": "RGBA32F", "combined": "RGBA32F",
     }
 
+    def target(self, name: str, size) -> object | None:
+        """One frame target at this resolution, if it exists (the viewport draws "combined")."""
+        targets = self._targets.get((int(size[0]), int(size[1])))
+        return None if targets is None else targets.get(name)
+
     def targets(self, width: int, height: int) -> dict:
         """The frame's textures at this resolution (kept; other resolutions are dropped)."""
         key = (int(width), int(height))

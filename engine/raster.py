@@ -152,7 +152,7 @@ class GPUFrame:
 
     def shade(self, traced) -> np.ndarray | None:
         """Deferred lighting and composite with the tracer's results; returns Combined (h, w, 4),
-        or None when ``read_combined`` is off (``combined_texture`` holds it)."""
+        or None when ``read_combined`` is off (the frame target "combined" holds it)."""
         gpu = gpu_module()
         start = time.perf_counter()
         uploads = self._upload_traced(gpu, traced)
@@ -463,7 +463,6 @@ class GPUFrame:
 
         gpu.state.blend_set("NONE")
         self._fullscreen(gpu, "composite", framebuffer, bind)
-        self.combined_texture = targets["combined"]
         return self._read(gpu, framebuffer, 0, "FLOAT", 4) if self.read_combined else None
 
     # -- read-back ------------------------------------------------------------------

@@ -217,9 +217,9 @@ def view_camera(view_matrix, window_matrix, width, height, ortho=False, clip_sta
 def render_view(depsgraph, camera: Camera, renderer: FrameRenderer, read_back: bool = True):
     """Render one PHRT frame of ``depsgraph`` seen by ``camera``; needs a GPU context
     (``view_draw``, or ``render()`` of an engine with ``bl_use_gpu_context``).
-    Returns the ``FrameResult``: its ``gpu_image`` is the GPU texture holding the image (valid
-    until the next frame is drawn); ``passes.combined`` is the same image read back ((h, w, 4),
-    bottom row first), or None without ``read_back``."""
+    Returns the ``FrameResult``: ``passes.combined`` is the image read back ((h, w, 4), bottom
+    row first), or None without ``read_back``; the GPU keeps it in the frame target "combined"
+    (``gpu_resources.RESOURCES.target``) until the next frame is drawn."""
     start = time.perf_counter()
     stand_in = _ViewCamera(camera.view_matrix, camera.projection, camera.ortho, camera.clip_start, camera.clip_end)
     snapshot = extract.extract(depsgraph, camera_override=stand_in)
@@ -230,7 +230,6 @@ def render_view(depsgraph, camera: Camera, renderer: FrameRenderer, read_back: b
     result = renderer.render(snapshot, gpu_frame)
     result.stats["extract_ms"] = extract_ms
     result.problems = list(snapshot.problems)
-    result.gpu_image = gpu_frame.combined_texture
     return result
 
 
@@ -245,8 +244,7 @@ class ViewportRender:
         self.renderer = FrameRenderer()
         self.stale = True
         self.view_key = None
-        self.image = None  # the last frame's GPU texture (a frame target of RESOURCES)
-        self.image_frame = None  # RESOURCES.frames_drawn when it was drawn
+        self.image_frame = None  # RESOURCES.frames_drawn when this view's image was drawn
         self.size = None
 
     def update(self, depsgraph):
@@ -263,11 +261,12 @@ class ViewportRender:
         view_matrix = np.array(region_3d.view_matrix, dtype=np.float64)
         window_matrix = np.array(region_3d.window_matrix, dtype=np.float64)
         key = (view_matrix.round(6).tobytes(), window_matrix.round(6).tobytes(), width, height)
-        if self.image is not None and self.image_frame != gpu_resources.RESOURCES.frames_drawn:
+        resources = gpu_resources.RESOURCES
+        if self.image_frame is not None and self.image_frame != resources.frames_drawn:
             self.stale = True  # another render drew into the frame targets since: draw ours again
         if self.stale or key != self.view_key:
             # Whatever happens, this view is done: a failing scene is not re-rendered on every redraw.
-            self.stale, self.view_key, self.image = False, key, None
+            self.stale, self.view_key, self.image_frame = False, key, None
             camera = view_camera(view_matrix, window_matrix, width, height, ortho=not region_3d.is_perspective,
                                  clip_start=getattr(space, "clip_start", 0.01),
                                  clip_end=getattr(space, "clip_end", 1000.0))
@@ -276,19 +275,21 @@ class ViewportRender:
                 result = render_view(depsgraph, camera, self.renderer, read_back=False)
             finally:
                 gpu.state.viewport_set(*viewport)
-            # The frame's own GPU texture is drawn: nothing is read back (textures are shared
-            # between the render and the window's context).
-            self.image = result.gpu_image
-            self.image_frame = gpu_resources.RESOURCES.frames_drawn
+            self.image_frame = resources.frames_drawn
             self.size = (width, height)
             engine.update_stats("PHRT", f"{result.stats['total_ms']:.0f} ms, "
                                         f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
-        if self.image is None:
+        # The frame's own GPU target is drawn: nothing is read back (textures are shared between
+        # the render and the window's context).  No reference to it is kept here: GPU objects
+        # belong to RESOURCES alone, which frees them deliberately.
+        texture = resources.target("combined", self.size) if self.image_frame is not None else None
+        if texture is None:
             return
         gpu.state.blend_set("ALPHA_PREMULT")
         engine.bind_display_space_shader(depsgraph.scene)
         try:
-            draw_texture_2d(self.image, (0, 0), region.width, region.height)
+            draw_texture_2d(texture, (0, 0), region.width, region.height)
         finally:
             engine.unbind_display_space_shader()
             gpu.state.blend_set("NONE")
+            del texture

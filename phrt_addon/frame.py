@@ -309,7 +309,12 @@ class FrameRenderer:
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
         transparent_materials = np.array([m.is_transparent for m in snapshot.materials], bool)
-        counters.upload_ms = self.trace_scene.update(snapshot, transparent_materials)
+        static_builds = self.trace_scene.stats["static_builds"]
+        update_ms = self.trace_scene.update(snapshot, transparent_materials)
+        # Only a build of the static scene is one-time work; checking that nothing changed and
+        # rebuilding the moving objects' scene recur every frame (the cost model learns them).
+        if self.trace_scene.stats["static_builds"] != static_builds:
+            counters.upload_ms = update_ms
         scene = self.trace_scene
         textures = {index: m.texture for index, m in enumerate(snapshot.materials) if m.texture is not None}
         tracer = RadianceTracer(scene, snapshot, materials, textures)

@@ -681,7 +681,7 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
                         if update:
                             view_render.update(depsgraph)
                         view_render.draw(engine, context, depsgraph)
-                        textures.append((view_render.image, gpu_resources.RESOURCES.frames_drawn))
+                        textures.append((view_render.image_frame, gpu_resources.RESOURCES.frames_drawn))
                 buffer = gpu.types.Buffer("FLOAT", WIDTH * HEIGHT * 4)
                 framebuffer.read_color(0, 0, WIDTH, HEIGHT, 4, 0, "FLOAT", data=buffer)
                 drawn = np.asarray(buffer).reshape(HEIGHT, WIDTH, 4).copy()
