@@ -267,7 +267,7 @@ def _quiet_exit():
 
 
 def main(argv=None):
-    as_program = argv is None
+    as_program = argv is None  # the `phrt` program itself: its stdout ends with its last line
     argv = sys.argv[1:] if argv is None else argv
     try:
         args = build_parser().parse_args(argv)

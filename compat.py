@@ -4,8 +4,8 @@ The supported versions are the ones ``make test-compat`` runs the whole suite
 on: 4.5 LTS (Python 3.11, numpy 1), 5.0 (Python 3.11, numpy 1) and 5.2 LTS
 (Python 3.13, numpy 2).  Everything else in the add-on, the command line, the
 sample scenes and the tests calls these functions instead of testing versions
-itself.  Each difference is detected by the feature, not the version number, and
-each function says which versions do what.
+itself.  A difference is detected by the feature where Blender offers one to test
+(``hasattr``), else by the version number; each function says which versions do what.
 """
 import gzip
 import re
@@ -106,15 +106,19 @@ def blend_file_version(path):
     A file saved by a newer Blender opens in 4.5 and 5.0 only "with loss of data" (they
     warn so, and report leaked memory at exit), so the command line rebuilds a sample
     scene saved by another version instead of opening it."""
+    import zstandard  # a dependency of the bpy module, bundled with Blender
+
     with open(path, "rb") as handle:
         head = handle.read(32)
-        if head.startswith(b"\x28\xb5\x2f\xfd"):  # zstd: Blender 3.0+ compression
-            import zstandard  # a dependency of the bpy module, bundled with Blender
-            handle.seek(0)
-            head = zstandard.ZstdDecompressor().stream_reader(handle).read(32)
-        elif head.startswith(b"\x1f\x8b"):  # gzip: before 3.0
-            handle.seek(0)
-            head = gzip.GzipFile(fileobj=handle).read(32)
+        try:
+            if head.startswith(b"\x28\xb5\x2f\xfd"):  # zstd: Blender 3.0+ compression
+                handle.seek(0)
+                head = zstandard.ZstdDecompressor().stream_reader(handle).read(32)
+            elif head.startswith(b"\x1f\x8b"):  # gzip: before 3.0
+                handle.seek(0)
+                head = gzip.GzipFile(fileobj=handle).read(32)
+        except (zstandard.ZstdError, OSError, EOFError):  # a damaged file: not a .blend header
+            return None
     match = _BLEND_HEADER.match(head)
     if match is None:
         return None

@@ -3,7 +3,9 @@
 Core tests (tests/core) never import bpy.  Integration tests get Blender (the
 bpy module) through the ``blender`` fixture, with the PHRT add-on registered
 from the checkout and Blender's user resources in a temporary folder, so no
-test reads or writes the developer's Blender configuration.
+test reads or writes the developer's Blender configuration.  ``phrt.register()``
+unregisters the add-on again when the interpreter ends, so the pytest process exits
+cleanly on every Blender of the matrix (4.5 would hang otherwise).
 """
 import os
 import tempfile

@@ -7,8 +7,9 @@ the matrix (`make test-compat`); these tests pin what differs between them.
   ends, the ``phrt`` command).
 - ``phrt render`` prints only its own line on stdout, even when Blender logs its colour
   management at start-up (5.x, with the OCIO variable set; 5.2 sets it for its children).
-- ``phrt.compat`` holds the differences (image format, .blend headers), and the manifest's
-  minimum version and the README say what the matrix runs."""
+- ``phrt.compat`` holds the differences (image format, node trees, .blend headers; the
+  keyframe helpers are used by every sample scene test), and the manifest's minimum
+  version and the README say what the matrix runs."""
 from __future__ import annotations
 
 import gzip
@@ -135,6 +136,11 @@ def test_blend_file_version_reads_every_kind_of_header(tmp_path):
     assert compat.blend_file_version(tmp_path / "old.blend") == (2, 79)
     (tmp_path / "text.blend").write_text("not a blend file, but long enough to be read\n")
     assert compat.blend_file_version(tmp_path / "text.blend") is None
+    damaged = (tmp_path / "zstd.blend").read_bytes()[:4] + b"garbage" * 8
+    (tmp_path / "damaged.blend").write_bytes(damaged)  # zstd magic, then no zstd stream
+    assert compat.blend_file_version(tmp_path / "damaged.blend") is None
+    (tmp_path / "damaged_gzip.blend").write_bytes(gzip.compress(b"BLENDER-v279REND" + bytes(64))[:12])
+    assert compat.blend_file_version(tmp_path / "damaged_gzip.blend") is None
 
 
 def test_sample_scene_saved_by_another_blender_is_rebuilt(tmp_path, monkeypatch):
