@@ -46,6 +46,9 @@ def build_parser():
     render.add_argument("--frames", help="frame range A-B (default: the whole path)")
     render.add_argument("--mode", default="hybrid", type=str.lower, help="raster, hybrid or raytrace")
     render.add_argument("--budget-ms", type=_number, help="frame time budget in ms (default: the scene's)")
+    render.add_argument("--budget-at", type=_number, metavar="F",
+                        help="frame time budget F of the way from raster (0) to ray traced (1) frame time on "
+                             "this machine, from runs of the path beside --out or a short calibration")
     render.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
     render.add_argument("--out", help="run directory (default: out/<scene>-<path>-<mode>/)")
     render.add_argument("--images", default="exr", type=str.lower, help="exr, png or none")
@@ -64,6 +67,13 @@ def _number(text):
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
     return value
+
+
+def check_budget_at(fraction):
+    """UserError unless ``fraction`` is None or within 0..1."""
+    if fraction is not None and not 0.0 <= fraction <= 1.0:
+        raise UserError(f"--budget-at {fraction:g} is outside 0..1: give the fraction of the way from raster (0) "
+                        f"to ray traced (1) frame time, e.g. --budget-at 0.33")
 
 
 def parse_resolution(text):
@@ -186,6 +196,9 @@ def command_render(args):
         raise UserError(f"unknown image format '{args.images}': use exr, png or none")
     if args.budget_ms is not None and args.budget_ms < 0:
         raise UserError(f"negative budget {args.budget_ms:g} ms: give --budget-ms a value >= 0")
+    check_budget_at(args.budget_at)
+    if args.budget_ms is not None and args.budget_at is not None:
+        raise UserError("--budget-ms and --budget-at both given: give the budget one way")
     resolution = parse_resolution(args.resolution)
     if args.frames is not None:
         try:
@@ -210,11 +223,15 @@ def command_render(args):
         with _quiet_stdout():
             result = replay_module.replay(scene, camera, frame_range, args.mode, out, images=args.images,
                                           budget_ms=args.budget_ms, resolution=resolution, scene_label=label,
-                                          on_progress=progress)
+                                          on_progress=progress, budget_at=args.budget_at)
     except replay_module.ReplayError as error:
         raise UserError(str(error)) from None
     summary = result.summary or {}
     total = summary.get("total_ms", {})
+    source = summary.get("budget_source")
+    if source:
+        print(f"phrt: budget at {source['budget_at']:g} = {source['budget_ms']:.0f} ms (raster {source['raster_ms']:.0f}"
+              f" ms, ray traced {source['raytrace_ms']:.0f} ms, from {source['method']})")
     print(f"phrt: {label}/{camera.name} {args.mode}: {result.frames_done} frames in "
           f"{time.perf_counter() - started:.1f} s, mean {total.get('mean', float('nan')):.0f} ms/frame "
           f"(p95 {total.get('p95', float('nan')):.0f}), budget {summary.get('budget_ms', 0):g} ms -> {out}")

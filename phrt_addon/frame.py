@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import heuristic, shading
+from . import benefit, heuristic, shading
 from .cost_model import CostModel, FrameStats
 from .gbuffer import GBuffer, element_pixel_stats
 from .scene import SceneSnapshot, transform_points
@@ -41,6 +41,7 @@ class FramePasses:
     normal: np.ndarray  # (h,w,3) float32
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
+    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
 
 
 @dataclass
@@ -87,6 +88,10 @@ class FrameRenderer:
         self.previous_selection = {}
         self.trace_scene = None
         self.frames_rendered = 0
+        # The error-aware relevance's per-element estimates (phrt_addon/benefit.py).
+        self.benefit_model = benefit.BenefitModel()
+        # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
+        self.forced_selection = None
 
     def close(self):
         if self.trace_scene is not None:
@@ -126,26 +131,36 @@ class FrameRenderer:
         element_bounds = _element_bounds(snapshot)
         footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px, mode) \
             if shadow_lights and mode != "RASTER" else np.zeros(n_elements)
+        learn_benefit = mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+        flags = {effect: np.array([getattr(e, effect) for e in snapshot.elements], bool)
+                 for effect in ("shadows", "reflections", "refractions")}
+        expected_benefit = self.benefit_model.benefit(
+            [e.name for e in snapshot.elements],
+            benefit.prior_per_pixel(layers, n_elements, flags["reflections"], flags["refractions"],
+                                    flags["shadows"])) if learn_benefit else None
         frame_elements = heuristic.FrameElements(
             names=[e.name for e in snapshot.elements],
             candidate=np.array([e.candidate for e in snapshot.elements], bool),
             area_px=area_px, centre_ndc=centre_ndc, distance=distance,
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
-            shadows=np.array([e.shadows for e in snapshot.elements], bool),
-            reflections=np.array([e.reflections for e in snapshot.elements], bool),
-            refractions=np.array([e.refractions for e in snapshot.elements], bool),
+            shadows=flags["shadows"], reflections=flags["reflections"], refractions=flags["refractions"],
             rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint, settings.max_bounces),
             frame_px=width * height,
             near_clip=snapshot.camera.clip_start,
+            benefit=expected_benefit,
         )
         selection = heuristic.select(
             frame_elements, self.previous_selection,
             heuristic.SelectionSettings(budget_ms=settings.budget_ms, selection_weight=settings.selection_weight,
                                         max_area_fraction=settings.max_area_fraction, mode=mode,
-                                        cost_mode=settings.cost_mode),
+                                        cost_mode=settings.cost_mode, relevance=settings.relevance,
+                                        order=settings.selection_order, budget_at=settings.budget_at),
             self.cost_model, frame=snapshot.frame)
+        if self.forced_selection is not None:
+            selection = heuristic.force_selection(selection, self.forced_selection)
         selected = np.asarray(selection.selected, bool)
+        raster_visibility = benefit.copy_visibility(visibility) if learn_benefit and np.any(selected) else None
         select_ms = _ms(start)
 
         # -- ray tracing ------------------------------------------------------
@@ -165,6 +180,15 @@ class FrameRenderer:
                                  refraction_radiance, selected)
         composite_ms = _ms(start)
 
+        if raster_visibility is not None:
+            # The error-aware relevance learns what tracing changed (selection bookkeeping: select_ms).
+            start = _timer()
+            difference = benefit.measure_differences(snapshot, layers, raster_visibility, visibility,
+                                                     reflection_radiance, refraction_radiance, selected,
+                                                     element_bounds, materials)
+            self.benefit_model.observe(frame_elements.names, selected, difference, area_px)
+            select_ms += _ms(start)
+
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
         # One-time work (Embree builds, shader compiles, new shadow maps) is not a per-frame cost.
         self.cost_model.observe(FrameStats(
@@ -180,7 +204,7 @@ class FrameRenderer:
         stats = {
             "frame": snapshot.frame, "mode": mode, "total_ms": total_ms, "raster_ms": raster_ms,
             "select_ms": select_ms, "trace_ms": trace_ms, "composite_ms": composite_ms,
-            "budget_ms": settings.budget_ms, "predicted_trace_ms": float(selection.predicted_trace_ms),
+            "budget_ms": selection.budget_ms, "predicted_trace_ms": float(selection.predicted_trace_ms),
             "n_candidates": int(np.sum(frame_elements.candidate)),
             "n_visible": int(np.sum(np.asarray(selection.visible, bool))),
             "n_selected": int(np.sum(selected)), "rays": counters.rays,
@@ -400,6 +424,7 @@ class FrameRenderer:
             normal=np.nan_to_num(gbuffer.front_normal()).astype(np.float32),
             selected=selected_flags[front].astype(np.float32),
             candidate=candidate_flags[front].astype(np.float32),
+            element=np.where(front >= 0, front + 1, 0).astype(np.float32),
         )
 
 
