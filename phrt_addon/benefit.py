@@ -16,9 +16,9 @@ image differs from its raster image, per pixel of the element:
   LDR-FLIP can see), summed and divided by the element's own pixel count;
 - **a prior** before its first traced frame (:func:`prior_per_pixel`), from the
   material under its pixels and its tagged effects: the specular reflectance
-  times the mirror share of the reflection (the tracer's roughness blend), the
-  transmission, and a small constant for shadows, each times a typical
-  contrast between the traced term and what raster puts there.
+  times the mirror share of the reflection (the tracer's roughness blend) and
+  the transmission, each times a typical contrast between the traced term and
+  what raster puts there, plus a small constant for shadows.
 
 :class:`BenefitModel` holds the estimates for a replay (one per
 ``FrameRenderer``): the first measurement replaces the prior, later ones are
@@ -30,9 +30,11 @@ import numpy as np
 
 from . import shading
 
-# Typical |traced - raster| of a fully replaced reflection or refraction term (LDR): the
-# traced radiance against the uniform environment colour raster uses instead.
-PRIOR_CONTRAST = 0.5
+# Typical |traced - raster| of a fully replaced term (LDR): a traced reflection against the
+# uniform environment colour raster puts there; a refraction bends the view of what raster
+# shows straight through, which differs less.
+REFLECTION_CONTRAST = 0.5
+REFRACTION_CONTRAST = 0.2
 # Prior per pixel of a shadow caster: shadow maps and rays mostly agree but at the edges.
 SHADOW_PRIOR = 0.02
 # Weight of a new measurement in the running estimate.
@@ -69,8 +71,8 @@ def prior_per_pixel(layers, n_elements, reflections, refractions, shadows) -> np
         metallic = surface.metallic[ours].astype(np.float64)
         transmissive = surface.transmission[ours] * (1.0 - metallic)
         reflectance = surface.f0[ours] @ LUMINANCE
-        expected = (flags[0][element] * reflectance * reflection_blend(surface.roughness[ours])
-                    + flags[1][element] * transmissive) * PRIOR_CONTRAST + flags[2][element] * SHADOW_PRIOR
+        expected = (flags[0][element] * reflectance * reflection_blend(surface.roughness[ours]) * REFLECTION_CONTRAST
+                    + flags[1][element] * transmissive * REFRACTION_CONTRAST + flags[2][element] * SHADOW_PRIOR)
         total += np.bincount(element, weights=expected, minlength=n_elements)
         count += np.bincount(element, minlength=n_elements)
     return np.where(count > 0, total / np.maximum(count, 1), 0.0)
@@ -82,12 +84,13 @@ def copy_visibility(visibility):
 
 
 def measure_differences(snapshot, layers, raster_visibility, visibility, reflection_radiance,
-                        refraction_radiance, selected, element_bounds, materials) -> np.ndarray:
+                        refraction_radiance, raster_behind, selected, element_bounds, materials) -> np.ndarray:
     """Summed per-pixel |traced - raster| (clipped linear luminance) attributable to each element.
 
     Arguments are the frame's own: the layer samples, the visibility before
     (``raster_visibility``, from :func:`copy_visibility`) and after tracing, the
     traced reflection and refraction radiance ``{layer: (pixel indices, radiance)}``,
+    the raster colour those refracted pixels had behind the glass (``raster_behind``),
     the selection mask, each element's world bounds and the material table.
     """
     from .frame import shadow_region
@@ -105,7 +108,7 @@ def measure_differences(snapshot, layers, raster_visibility, visibility, reflect
         if layer_name == "transparent":
             change *= materials.alpha[samples["material"][idx]][:, None]
         np.add.at(difference, samples["element"][idx], _luminance(change))
-    if "transparent" in refraction_radiance:
+    if "transparent" in refraction_radiance and raster_behind is not None:
         samples = layers["transparent"]
         idx, radiance = refraction_radiance["transparent"]
         surface = samples["surface"]
@@ -116,8 +119,7 @@ def measure_differences(snapshot, layers, raster_visibility, visibility, reflect
         alpha = materials.alpha[samples["material"][idx]]
         through = alpha * transmissive * (1.0 - fresnel_t)
         weight = through[:, None] * surface.albedo[idx] + (1.0 - alpha)[:, None]
-        behind = _raster_behind(layers, samples["flat"][idx])
-        change = weight * (np.asarray(radiance, np.float64) - behind)
+        change = weight * (np.asarray(radiance, np.float64) - np.asarray(raster_behind, np.float64))
         np.add.at(difference, samples["element"][idx], _luminance(change))
     casters = [index for index in np.flatnonzero(selected)
                if snapshot.elements[index].shadows and element_bounds[index] is not None]
@@ -152,19 +154,6 @@ def _reflect_weight(surface, idx, world):
     cos_v = np.clip(shading.dot(surface.normal[idx], surface.view[idx]), 0.0, 1.0)
     fresnel_t = shading.fresnel_dielectric(cos_v, surface.ior[idx])
     return fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
-
-
-def _raster_behind(layers, flat):
-    """What raster shows behind transparent pixels: an estimate from the opaque layer's
-    albedo (the exact shaded colour is the composite's); the world colour where nothing is."""
-    opaque = layers["opaque"]
-    behind = np.zeros((len(flat), 3))
-    position = np.searchsorted(opaque["flat"], flat)
-    position = np.minimum(position, max(len(opaque["flat"]) - 1, 0))
-    if len(opaque["flat"]):
-        found = opaque["flat"][position] == flat
-        behind[found] = opaque["surface"].albedo[position[found]]
-    return behind
 
 
 class BenefitModel:

@@ -92,6 +92,7 @@ class FrameRenderer:
         self.benefit_model = benefit.BenefitModel()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None
+        self.raster_behind = None  # raster colour behind the refracted pixels of the last frame
 
     def close(self):
         if self.trace_scene is not None:
@@ -176,6 +177,7 @@ class FrameRenderer:
 
         # -- compositing --------------------------------------------------------
         start = _timer()
+        self.raster_behind = None
         passes = self._composite(snapshot, gbuffer, layers, materials, visibility, reflection_radiance,
                                  refraction_radiance, selected)
         composite_ms = _ms(start)
@@ -184,8 +186,8 @@ class FrameRenderer:
             # The error-aware relevance learns what tracing changed (selection bookkeeping: select_ms).
             start = _timer()
             difference = benefit.measure_differences(snapshot, layers, raster_visibility, visibility,
-                                                     reflection_radiance, refraction_radiance, selected,
-                                                     element_bounds, materials)
+                                                     reflection_radiance, refraction_radiance, self.raster_behind,
+                                                     selected, element_bounds, materials)
             self.benefit_model.observe(frame_elements.names, selected, difference, area_px)
             select_ms += _ms(start)
 
@@ -404,6 +406,7 @@ class FrameRenderer:
             behind = image[transparent["flat"]].copy()  # raster: straight through, no bending
             if "transparent" in refraction_radiance:
                 idx, radiance = refraction_radiance["transparent"]
+                self.raster_behind = behind[idx].copy()  # what tracing replaced (error-aware relevance)
                 behind[idx] = radiance
             tint = surface.albedo
             transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * tint * behind
