@@ -113,7 +113,7 @@ def measure_popping(run_dir, reference_dir, selection_rows=None) -> PoppingResul
     by_frame = {}
     for row in rows:
         by_frame.setdefault(int(row["frame"]), []).append((str(row["element"]), bool(row["selected"])))
-    frames = sorted(by_frame)
+    frames = sorted(set(by_frame) | {int(row["frame"]) for row in runlog.read_frames(run_dir)})
     result = PoppingResult(frame_count=len(frames))
     first = runlog.frame_image_path(run_dir, frames[0]) if frames else None
     if first is None or first.suffix.lower() != ".exr":
@@ -126,8 +126,8 @@ def measure_popping(run_dir, reference_dir, selection_rows=None) -> PoppingResul
         return result
     run_frames, reference_frames = _Frames(run_dir, elements=True), _Frames(reference_dir)
     for before, after in zip(frames, frames[1:]):
-        state_before = dict(by_frame[before])
-        state_after = dict(by_frame[after])
+        state_before = dict(by_frame.get(before, ()))
+        state_after = dict(by_frame.get(after, ()))
         flipped = sorted(name for name in set(state_before) | set(state_after)
                          if state_before.get(name, False) != state_after.get(name, False))
         if not flipped:
@@ -136,8 +136,8 @@ def measure_popping(run_dir, reference_dir, selection_rows=None) -> PoppingResul
         reference_pair = reference_frames.get(before), reference_frames.get(after)
         if None in pair or None in reference_pair:
             continue
-        index_before = {name: position + 1 for position, (name, _) in enumerate(by_frame[before])}
-        index_after = {name: position + 1 for position, (name, _) in enumerate(by_frame[after])}
+        index_before = {name: position + 1 for position, (name, _) in enumerate(by_frame.get(before, ()))}
+        index_after = {name: position + 1 for position, (name, _) in enumerate(by_frame.get(after, ()))}
         for name in flipped:
             mask = np.zeros(pair[0][1].shape, bool)
             if name in index_before:

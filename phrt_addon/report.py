@@ -170,6 +170,8 @@ class ReportFiles:
     sweep_csv: Path = None
     sweep_json: Path = None
     selection_quality_png: Path = None
+    # The matplotlib Figures behind the PNGs, by file name (tests read their axes and labels).
+    figures: dict = field(default_factory=dict)
 
 
 def load_run(run_dir):
@@ -317,11 +319,12 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
     rows = sweep_rows(runs, errors, regrets, pops, references)
     _write_errors_csv(files.errors_csv, runs, errors)
     _write_sweep(files.sweep_csv, files.sweep_json, rows, oracle_results)
-    _plot_error_vs_time(files.error_vs_time_png, groups, errors)
-    _plot_timeline(files.timeline_png, groups)
+    files.figures[files.error_vs_time_png.name] = _plot_error_vs_time(files.error_vs_time_png, groups, errors)
+    files.figures[files.timeline_png.name] = _plot_timeline(files.timeline_png, groups)
     if any(run.mode == "HYBRID" for run in runs):
         files.selection_quality_png = out_dir / "selection_quality.png"
-        _plot_selection_quality(files.selection_quality_png, groups, regrets, pops)
+        files.figures[files.selection_quality_png.name] = _plot_selection_quality(
+            files.selection_quality_png, groups, regrets, pops)
     if oracle_results is not None:
         for name in (oracle.REGRET_CSV, oracle.CANDIDATES_CSV):
             shutil.copyfile(oracle_results.folder / name, out_dir / name)
@@ -487,7 +490,7 @@ def _figure(**kwargs):
 def _plot_error_vs_time(path, groups, errors):
     """One row per (scene, path) (errors of different paths do not compare): mean LDR-FLIP
     and mean relMSE against mean frame time."""
-    figure = _figure(figsize=(16, 6.5 * len(groups)))
+    figure = _figure(figsize=(16, 7.5 * len(groups)))
     panels = figure.subplots(len(groups), 2, squeeze=False)
     for row, (group, members) in enumerate(groups.items()):
         _plot_curves(panels[row, 0], group, members, errors, "flip",
@@ -496,6 +499,7 @@ def _plot_error_vs_time(path, groups, errors):
                      "mean relMSE against the reference (lower is better)")
     figure.tight_layout()
     figure.savefig(path, dpi=100)
+    return figure
 
 
 def _variant_styles(members):
@@ -555,13 +559,13 @@ def _plot_curves(axes, group, members, errors, key, ylabel):
     top = float(values.max()) if values.max() > 0 else 1.0
     for budget, fraction in sorted(budgets.items()):
         axes.axvline(budget, color="tab:red", linestyle=":", linewidth=0.8, alpha=0.6)
-        text = f"budget {budget:.0f} ms" + (f" (at {fraction:g})" if fraction is not None else "")
+        text = f"budget {budget:.0f} ms" + (f" (at {fraction:.2f})" if fraction is not None else "")
         axes.annotate(text, (budget, 1.0), xycoords=("data", "axes fraction"), xytext=(3, -4),
                       textcoords="offset points", fontsize=7, color="tab:red", rotation=90, va="top")
     axes.scatter([], [], marker="|", s=100, color="0.3", label="budget of a hybrid point (dotted to it)")
     axes.set_xlim(0.0, 1.08 * max(float(times.max()), *budgets.keys(), 1.0))
     axes.set_ylim(0.0, 1.18 * top)
-    axes.legend(fontsize=7, loc="upper right")
+    axes.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=3, frameon=False)
 
 
 def _plot_selection_quality(path, groups, regrets, pops):
@@ -599,6 +603,7 @@ def _plot_selection_quality(path, groups, regrets, pops):
                           transform=axes.transAxes)
     figure.tight_layout()
     figure.savefig(path, dpi=100)
+    return figure
 
 
 def _plot_timeline(path, groups):
@@ -637,6 +642,7 @@ def _plot_timeline(path, groups):
         selected_axes.sharex(time_axes)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
+    return figure
 
 
 def _ms(value):
