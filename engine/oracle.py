@@ -105,9 +105,16 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
                 alone.append(metrics.flip(reference, image))
                 area.append(int(selection.elements.area_px[selection.names.index(name)]))
             alone = np.array(alone, dtype=np.float64)
-            candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=np.array(cost, dtype=np.float64),
+            cost = np.array(cost, dtype=np.float64)
+            overhead = 0.0
+            if len(names) > 1:  # all together: the trace stage's fixed part, paid once per frame
+                image, stats, _ = renderer.render(frame, names)
+                images[frozenset(names)] = image
+                overhead = oracle.trace_overhead_ms(
+                    cost, max(float(stats["trace_ms"]) - float(stats.get("upload_ms") or 0.0), 0.0))
+            candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=cost - overhead,
                                                 benefit=flip_raster - alone, flip_raster=flip_raster,
-                                                flip_alone=alone, area_px=np.array(area))
+                                                flip_alone=alone, area_px=np.array(area), overhead_ms=overhead)
             measured.append(candidates)
             errors = {frozenset(): flip_raster, **{frozenset((n,)): e for n, e in zip(names, alone.tolist())}}
             for label, run in runs.items():
@@ -123,7 +130,9 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
                     oracle_flip = heuristic_flip  # the same selection renders the same image
                 else:
                     if oracle_set not in errors:
-                        image, _, _ = renderer.render(frame, oracle_set)
+                        image = images.get(oracle_set)
+                        if image is None:
+                            image, _, _ = renderer.render(frame, oracle_set)
                         errors[oracle_set] = metrics.flip(reference, image)
                     oracle_flip = errors[oracle_set]
                 regret_rows.append(oracle.regret_row(label, frame, time_left, heuristic_set, heuristic_flip,

@@ -9,7 +9,10 @@ On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
    - its **benefit**: mean LDR-FLIP of the raster frame minus that of the frame
      with the element traced alone (its own error drop), and
    - its **cost**: the trace stage's measured ms when traced alone (without
-     one-time Embree uploads);
+     one-time Embree uploads), less the trace stage's fixed part, which a frame
+     pays once whatever it traces (``overhead_ms``: how much the candidates
+     traced alone cost more, summed, than all of them traced together, per
+     extra trace); a subset costs its elements' costs plus that fixed part;
 2. for every hybrid run, chooses the subset of candidates with the largest
    summed benefit whose summed cost fits the same time as the heuristic had:
    the run's own time left T at that frame (``time_left_ms`` in its
@@ -53,7 +56,7 @@ CANDIDATES_CSV = "candidates.csv"
 REGRET_CSV = "regret.csv"
 DEFAULT_EVERY = 8
 MIN_BENEFIT = 1e-6
-CANDIDATE_COLUMNS = ("frame", "element", "area_px", "cost_ms", "flip_alone", "flip_raster", "benefit")
+CANDIDATE_COLUMNS = ("frame", "element", "area_px", "cost_ms", "overhead_ms", "flip_alone", "flip_raster", "benefit")
 REGRET_COLUMNS = ("run", "frame", "time_left_ms", "capacity_ms", "heuristic_flip", "oracle_flip", "regret", "heuristic",
                   "oracle", "oracle_only", "heuristic_only", "oracle_cost_ms", "heuristic_cost_ms",
                   "oracle_benefit", "heuristic_benefit")
@@ -138,21 +141,37 @@ class FrameCandidates:
     flip_raster: float
     flip_alone: np.ndarray = field(default_factory=lambda: np.zeros(0))
     area_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    overhead_ms: float = 0.0
 
     def capacity(self, time_left_ms: float, heuristic_set) -> float:
         """The time the oracle may fill: T, or the heuristic's own choice's cost if it overran T."""
         return max(float(time_left_ms), self.totals(heuristic_set)[0])
 
     def choose(self, capacity_ms: float) -> frozenset:
-        """The oracle's subset for ``capacity_ms`` of tracing."""
-        mask = knapsack(np.maximum(self.benefit, MIN_BENEFIT), self.cost_ms, capacity_ms)
+        """The oracle's subset for ``capacity_ms`` of tracing (the fixed part paid once)."""
+        room = float(capacity_ms) - self.overhead_ms
+        if room < 0:
+            return frozenset()
+        mask = knapsack(np.maximum(self.benefit, MIN_BENEFIT), self.cost_ms, room)
         return frozenset(name for name, taken in zip(self.names, mask.tolist()) if taken)
 
     def totals(self, names) -> tuple[float, float]:
-        """(summed cost ms, summed benefit) of a subset (names outside the candidates count 0)."""
+        """(cost ms, summed benefit) of a subset (names outside the candidates count 0); a
+        non-empty subset pays the fixed part once."""
         index = {name: position for position, name in enumerate(self.names)}
         rows = [index[name] for name in names if name in index]
-        return float(np.sum(self.cost_ms[rows])), float(np.sum(np.maximum(self.benefit[rows], MIN_BENEFIT)))
+        fixed = self.overhead_ms if rows else 0.0
+        return (float(np.sum(self.cost_ms[rows])) + fixed,
+                float(np.sum(np.maximum(self.benefit[rows], MIN_BENEFIT))))
+
+
+def trace_overhead_ms(alone_ms, together_ms) -> float:
+    """The trace stage's fixed part from the costs of n candidates traced alone and of all of
+    them together: (sum alone - together) / (n - 1), within [0, the cheapest alone]."""
+    alone = np.asarray(alone_ms, dtype=np.float64)
+    if len(alone) < 2 or not np.isfinite(together_ms):
+        return 0.0
+    return float(np.clip((alone.sum() - float(together_ms)) / (len(alone) - 1), 0.0, alone.min()))
 
 
 def summary_hash(run_dir) -> str | None:
@@ -252,7 +271,7 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
         {"frame": item.frame, "element": name, "area_px": int(item.area_px[index]) if len(item.area_px) else None,
-         "cost_ms": float(item.cost_ms[index]),
+         "cost_ms": float(item.cost_ms[index]), "overhead_ms": item.overhead_ms,
          "flip_alone": float(item.flip_alone[index]) if len(item.flip_alone) else None,
          "flip_raster": item.flip_raster, "benefit": float(item.benefit[index])}
         for item in candidates for index, name in enumerate(item.names)])

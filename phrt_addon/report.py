@@ -45,7 +45,6 @@ import html
 import json
 import os
 import re
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -326,8 +325,12 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
         files.figures[files.selection_quality_png.name] = _plot_selection_quality(
             files.selection_quality_png, groups, regrets, pops)
     if oracle_results is not None:
-        for name in (oracle.REGRET_CSV, oracle.CANDIDATES_CSV):
-            shutil.copyfile(oracle_results.folder / name, out_dir / name)
+        oracle.write_csv(out_dir / oracle.REGRET_CSV, oracle.REGRET_COLUMNS,
+                         [{**row, **{key: ";".join(row[key]) for key in ("heuristic", "oracle", "oracle_only",
+                                                                         "heuristic_only")}}
+                          for row in oracle_results.regret_rows])
+        oracle.write_csv(out_dir / oracle.CANDIDATES_CSV, ("sweep",) + oracle.CANDIDATE_COLUMNS,
+                         oracle_results.candidate_rows)
     sections = _sections(runs, groups, references, errors, files, rows=rows, regrets=regrets, pops=pops,
                          oracle_results=oracle_results)
     files.markdown.write_text(_markdown(sections), encoding="utf-8")
@@ -350,12 +353,25 @@ def _measure_popping(runs, references):
 
 
 def _oracle_results(runs, oracle_dir):
+    """The oracle folder's results (several folders, e.g. two sweeps, are merged)."""
     if oracle_dir is None:
         parents = {run.run_dir.resolve().parent for run in runs}
         if len(parents) != 1:
             return None
         oracle_dir = next(iter(parents)) / oracle.ORACLE_DIR
-    return oracle.read_results(oracle_dir)
+    folders = [oracle_dir] if isinstance(oracle_dir, (str, Path)) else list(oracle_dir)
+    found = [results for results in map(oracle.read_results, folders) if results is not None]
+    if not found:
+        return None
+    for results in found:  # which sweep each candidate row came from
+        results.candidate_rows = [{"sweep": results.folder.resolve().parent.name, **row}
+                                  for row in results.candidate_rows]
+    merged = found[0]
+    for results in found[1:]:
+        merged.info = {**merged.info, "runs": {**merged.info.get("runs", {}), **results.info.get("runs", {})}}
+        merged.regret_rows = merged.regret_rows + results.regret_rows
+        merged.candidate_rows = merged.candidate_rows + results.candidate_rows
+    return merged
 
 
 @dataclass
@@ -913,31 +929,48 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     return items
 
 
+def relevance_verdict(paper, error):
+    """Which relevance wins over the budgets both ran ({budget_at: sweep row}): the mean LDR-FLIP
+    over those budgets (the area under each curve), the budgets where each is lower, and the
+    mean regret.  Returns (text, relative change of the mean LDR-FLIP or None)."""
+    shared = sorted(fraction for fraction in set(paper) & set(error)
+                    if paper[fraction]["flip"] is not None and error[fraction]["flip"] is not None)
+    if not shared:
+        return "the two relevances could not be compared (no error measured).", None
+    flip_paper = float(np.mean([paper[f]["flip"] for f in shared]))
+    flip_error = float(np.mean([error[f]["flip"] for f in shared]))
+    lower = sum(1 for f in shared if error[f]["flip"] < paper[f]["flip"])
+    higher = sum(1 for f in shared if error[f]["flip"] > paper[f]["flip"])
+    change = (flip_error - flip_paper) / flip_paper if flip_paper > 0 else None
+    if flip_error == flip_paper:
+        head = "neither relevance wins"
+    else:
+        head = f"the {'error-aware' if flip_error < flip_paper else 'paper'} relevance wins"
+    text = (f"{head}: mean LDR-FLIP over the {len(shared)} budget(s) {flip_paper:.4f} with the paper's R, "
+            f"{flip_error:.4f} with the error-aware R"
+            + (f" ({100 * change:+.1f}%)" if change is not None else "")
+            + f"; the error-aware R is lower at {lower} and higher at {higher} of them")
+    regrets = [(paper[f]["regret"], error[f]["regret"]) for f in shared
+               if paper[f]["regret"] is not None and error[f]["regret"] is not None]
+    if regrets:
+        text += (f"; mean regret {np.mean([a for a, _ in regrets]):.4f} (paper R) against "
+                 f"{np.mean([b for _, b in regrets]):.4f} (error-aware R)")
+    return text + ".", change
+
+
 def _relevance_comparison(scene, path, paper, error):
     """The paper's relevance against the error-aware one at each budget both ran."""
-    table, flip_changes, regret_wins, compared = [], [], 0, 0
+    table = []
     for fraction in sorted(set(paper) & set(error)):
         a, b = paper[fraction], error[fraction]
         change = None
         if a["flip"] and b["flip"] is not None:
             change = 100.0 * (b["flip"] - a["flip"]) / a["flip"]
-            flip_changes.append(change)
-        if a["regret"] is not None and b["regret"] is not None:
-            compared += 1
-            regret_wins += b["regret"] < a["regret"]
         table.append([f"{fraction:.2f}", _number(a["budget_ms"], ".1f"), _number(a["flip"], ".4f"),
                       _number(b["flip"], ".4f"), _signed(change, ".1f") + ("%" if change is not None else ""),
                       _number(a["regret"], ".4f"), _number(b["regret"], ".4f"),
                       _number(a["popping"], ".4f"), _number(b["popping"], ".4f")])
-    if flip_changes:
-        better = sum(1 for change in flip_changes if change < 0)
-        mean_change = float(np.mean(flip_changes))
-        winner = ("the error-aware relevance" if mean_change < 0 else "the paper's relevance")
-        verdict = (f"On {scene} / {path}, {winner} wins: the error-aware relevance changes the mean LDR-FLIP "
-                   f"by {mean_change:+.1f}% on average over {len(flip_changes)} budget(s) (lower at {better} "
-                   f"of them)" + (f"; its regret is lower at {regret_wins} of {compared}." if compared else "."))
-    else:
-        verdict = f"On {scene} / {path} the two relevances could not be compared (no error measured)."
+    verdict, _ = relevance_verdict(paper, error)
     return [("table", _Table(
         f"Paper relevance against error-aware relevance: {scene} / {path}",
         ["Budget at", "Budget ms", "LDR-FLIP, paper R", "LDR-FLIP, error-aware R", "Change",
@@ -945,7 +978,7 @@ def _relevance_comparison(scene, path, paper, error):
         table,
         "Both with the measured cost model, I = 0.5 and the paper's greedy order; the error-aware relevance "
         "weights V by each element's running estimate of its traced-vs-raster difference per pixel "
-        "(a prior from its material before it is first traced). " + verdict))]
+        f"(a prior from its material before it is first traced). On {scene} / {path}, " + verdict))]
 
 
 def _markdown_cell(text):

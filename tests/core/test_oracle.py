@@ -99,3 +99,16 @@ def test_results_round_trip_and_go_stale_when_a_run_is_redone(tmp_path):
     (run / "summary.json").write_text(json.dumps({"frame_count": 8, "redone": True}))
     assert not results.is_current_for("run-a", run)
     assert oracle.read_results(tmp_path / "missing") is None
+
+
+def test_the_trace_stages_fixed_part_is_paid_once_per_frame():
+    # Alone 12, 7 and 5 ms; together 18 ms: 6 ms of the 24 summed are the fixed part paid twice too often.
+    assert oracle.trace_overhead_ms([12.0, 7.0, 5.0], 18.0) == pytest.approx(3.0)
+    assert oracle.trace_overhead_ms([12.0, 7.0], 30.0) == 0.0  # never negative
+    assert oracle.trace_overhead_ms([4.0, 9.0], 1.0) == 4.0  # at most the cheapest alone
+    assert oracle.trace_overhead_ms([4.0], 4.0) == 0.0
+    frame = oracle.FrameCandidates(frame=8, names=["a", "b"], cost_ms=np.array([9.0, 4.0]),
+                                   benefit=np.array([0.02, 0.01]), flip_raster=0.05, overhead_ms=3.0)
+    assert frame.totals({"a", "b"}) == (pytest.approx(16.0), pytest.approx(0.03))
+    assert frame.totals(set()) == (0.0, 0.0)
+    assert frame.choose(12.0) == {"a"} and frame.choose(16.0) == {"a", "b"} and frame.choose(2.0) == frozenset()

@@ -139,7 +139,8 @@ def test_relevance_comparison_names_the_winner(sweep):
     _, _, files = sweep
     markdown = files.markdown.read_text()
     assert "## Paper relevance against error-aware relevance: arcade / path1" in markdown
-    assert "the error-aware relevance wins" in markdown  # half the missing reflection at each budget
+    assert "the error-aware relevance wins: mean LDR-FLIP over the 2 budget(s)" in markdown  # half the error
+    assert "the error-aware R is lower at 2 and higher at 0 of them" in markdown
 
 
 def test_table_ii_shows_the_paper_heuristic_beside_the_papers_sponza_ratios(sweep):
