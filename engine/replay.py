@@ -21,7 +21,9 @@ import bpy
 from ..phrt_addon import runlog
 from . import extract, final
 
-MODES = ("RASTER", "HYBRID", "RAYTRACE")
+# Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
+# from the raster and raytrace runs it has just written beside the hybrid one (no calibration).
+MODES = ("RASTER", "RAYTRACE", "HYBRID")
 IMAGE_FORMATS = ("exr", "png", "none")
 
 
