@@ -5,7 +5,7 @@
                       [--budget-ms T] [--resolution WxH] [--out DIR] [--images exr|png|none]
     phrt report RUN_DIR... [--reference RUN_DIR] [--out DIR]
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
-                     [--resolution WxH] [--out DIR] [--oracle-every K]
+                     [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -71,6 +71,9 @@ def build_parser():
     sweep.add_argument("--out", help="sweep folder (default: out/<scene>-<path>-sweep/)")
     sweep.add_argument("--oracle-every", type=_count, default=None, metavar="K",
                        help="the oracle judges every K-th frame (default 8)")
+    sweep.add_argument("--variants", metavar="NAME[,NAME...]",
+                       help="selection variants of the hybrid runs (default all: measured, papercost, i0, i0.1, "
+                            "rperms, error)")
     return parser
 
 
@@ -304,6 +307,13 @@ def command_sweep(args):
     from .phrt_addon import plan as plan_module
     from .phrt_addon import report
     fractions = _budget_fractions(args)
+    variants = tuple(plan_module.VARIANTS)
+    if args.variants is not None:
+        variants = tuple(dict.fromkeys(name.strip() for name in args.variants.split(",") if name.strip()))
+        unknown = [name for name in variants if name not in plan_module.VARIANTS]
+        if unknown or not variants:
+            raise UserError(f"unknown selection variant(s) {', '.join(unknown) or repr(args.variants)}: use some of "
+                            f"{', '.join(plan_module.VARIANTS)}")
     resolution = parse_resolution(args.resolution)
     if args.frames is not None:
         try:
@@ -325,7 +335,7 @@ def command_sweep(args):
     folder = Path(args.out) if args.out else Path("out") / f"{label}-{camera.name}-sweep"
     _check_output_dir(folder)
     scene_ref = args.scene if Path(args.scene).suffix.lower() != ".blend" else str(Path(args.scene).resolve())
-    plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions,
+    plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
                                   oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
     plan_path = plan_module.write_plan(plan, folder)
     started = time.perf_counter()

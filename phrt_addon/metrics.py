@@ -179,6 +179,15 @@ def _read_exr(path):
 def read_pass(path, pass_name):
     """One pass of a Blender multilayer EXR as float32 (H, W, channels), top row first,
     e.g. ``read_pass(path, "PHRT Element")``; ``ValueError`` if the file has no such pass."""
+    return read_passes(path, (pass_name,))[pass_name]
+
+
+_CHANNEL_ORDER = {"R": 0, "G": 1, "B": 2, "A": 3, "X": 0, "Y": 1, "Z": 2}
+
+
+def read_passes(path, pass_names):
+    """Several passes of one multilayer EXR, read once: {name: float32 (H, W, channels)} with
+    channels in R, G, B, A (X, Y, Z) order; ``ValueError`` if a pass is missing."""
     import OpenEXR
 
     path = Path(path)
@@ -190,13 +199,17 @@ def read_pass(path, pass_name):
                     channels.setdefault(name, channel.pixels)
     except (OSError, RuntimeError) as error:
         raise ValueError(f"{path}: cannot read the image ({error})") from error
-    names = sorted(name for name in channels if name.rsplit(".", 1)[0].split(".")[-1] == pass_name)
-    if not names:
-        raise ValueError(f"{path}: no pass '{pass_name}'")
-    layer = names[0].rsplit(".", 1)[0]
-    planes = [channels[name] for name in names if name.rsplit(".", 1)[0] == layer]
-    image = np.stack([np.asarray(plane, dtype=np.float32) for plane in planes], axis=-1)
-    return np.nan_to_num(image, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX)
+    passes = {}
+    for pass_name in pass_names:
+        names = sorted(name for name in channels if name.rsplit(".", 1)[0].split(".")[-1] == pass_name)
+        if not names:
+            raise ValueError(f"{path}: no pass '{pass_name}'")
+        layer = names[0].rsplit(".", 1)[0]
+        names = sorted((name for name in names if name.rsplit(".", 1)[0] == layer),
+                       key=lambda name: _CHANNEL_ORDER.get(name.rsplit(".", 1)[1], 9))
+        image = np.stack([np.asarray(channels[name], dtype=np.float32) for name in names], axis=-1)
+        passes[pass_name] = np.nan_to_num(image, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX)
+    return passes
 
 
 def _read_png(path):

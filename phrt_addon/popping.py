@@ -90,10 +90,11 @@ class _Frames:
             path = runlog.frame_image_path(self.run_dir, frame)
             if path is None:
                 self.cache[frame] = None
+            elif self.elements:
+                passes = metrics.read_passes(path, (metrics.COMBINED_PASS, ELEMENT_PASS))
+                self.cache[frame] = (passes[metrics.COMBINED_PASS][..., :3], passes[ELEMENT_PASS][..., 0])
             else:
-                image = metrics.read_image(path)
-                element = metrics.read_pass(path, ELEMENT_PASS)[..., 0] if self.elements else None
-                self.cache[frame] = (image, element)
+                self.cache[frame] = (metrics.read_image(path), None)
             if len(self.cache) > 4:  # consecutive pairs only need the last two frames
                 self.cache.pop(next(iter(self.cache)))
         return self.cache[frame]
@@ -107,8 +108,12 @@ def _crop(mask):
             slice(max(columns[0] - MARGIN_PX, 0), min(columns[-1] + MARGIN_PX + 1, width)))
 
 
-def measure_popping(run_dir, reference_dir, selection_rows=None) -> PoppingResult:
-    """Popping of every flip of the run in ``run_dir`` against the run in ``reference_dir``."""
+def measure_popping(run_dir, reference_dir, selection_rows=None, reference_maps=None) -> PoppingResult:
+    """Popping of every flip of the run in ``run_dir`` against the run in ``reference_dir``.
+
+    ``reference_maps``: a dict shared by the runs of one reference, caching the reference's
+    FLIP maps by (frames, window) (an element covers the same pixels in every run)."""
+    reference_maps = {} if reference_maps is None else reference_maps
     rows = runlog.read_selection(run_dir) if selection_rows is None else selection_rows
     by_frame = {}
     for row in rows:
@@ -151,7 +156,11 @@ def measure_popping(run_dir, reference_dir, selection_rows=None) -> PoppingResul
             window = _crop(mask)
             inside = mask[window]
             run_map = metrics.flip_map(pair[0][0][window], pair[1][0][window])
-            reference_map = metrics.flip_map(reference_pair[0][0][window], reference_pair[1][0][window])
+            key = (str(reference_dir), before, after, window[0].start, window[0].stop, window[1].start,
+                   window[1].stop)
+            if key not in reference_maps:
+                reference_maps[key] = metrics.flip_map(reference_pair[0][0][window], reference_pair[1][0][window])
+            reference_map = reference_maps[key]
             result.pops.append(Pop(after, name, state_after.get(name, False), pixels,
                                    float(run_map[inside].mean()), float(reference_map[inside].mean())))
     return result

@@ -59,7 +59,7 @@ WORST_ELEMENTS = 3
 # sweep.csv: the contract's columns first, then what tells the curves apart.
 SWEEP_COLUMNS = ("run", "mode", "cost_mode", "budget_ms", "mean_ms", "p95_ms", "flip", "relmse", "psnr", "regret",
                  "flips_per_100", "popping", "scene", "path", "variant", "budget_at", "selection_weight",
-                 "selection_order", "relevance", "frames", "mean_selected", "regret_frames")
+                 "selection_order", "relevance", "frames", "mean_selected", "regret_frames", "regret_share")
 # The paper's Table II (ms per frame: raster, hybrid, ray tracing) and which of its
 # environments each sample scene stands for.
 PAPER_TABLE_II = {
@@ -341,6 +341,7 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
 def _measure_popping(runs, references):
     """{id(run): PoppingResult} for runs with images whose path has a reference with images."""
     pops = {}
+    reference_maps = {}
     for run in runs:
         reference = references.get(run.group)
         if reference is None or not reference.has_images or not run.has_images:
@@ -348,7 +349,7 @@ def _measure_popping(runs, references):
         if run is reference:
             pops[id(run)] = popping.PoppingResult(frame_count=len(run.frames))  # the reference: 0 by definition
             continue
-        pops[id(run)] = popping.measure_popping(run.run_dir, reference.run_dir, run.selection)
+        pops[id(run)] = popping.measure_popping(run.run_dir, reference.run_dir, run.selection, reference_maps)
     return pops
 
 
@@ -385,6 +386,7 @@ class RunRegret:
     oracle_flip: float | None = None
     differs: int = 0
     overran: int = 0
+    lost_share: float | None = None  # mean (heuristic - oracle) / (raster - oracle) where the oracle gains
     oracle_only: dict = field(default_factory=dict)
     heuristic_only: dict = field(default_factory=dict)
     note: str = ""
@@ -409,6 +411,10 @@ def _regrets(runs, results):
             regrets[id(run)] = RunRegret(note="no sampled frame")
             continue
         values = np.array([row["regret"] for row in rows], dtype=float)
+        raster = {int(row["frame"]): float(row["flip_raster"]) for row in results.candidate_rows
+                  if row.get("sweep", results.folder.resolve().parent.name) == run.run_dir.resolve().parent.name}
+        shares = [(row["heuristic_flip"] - row["oracle_flip"]) / (raster[row["frame"]] - row["oracle_flip"])
+                  for row in rows if row["frame"] in raster and raster[row["frame"]] - row["oracle_flip"] > 1e-6]
         oracle_only, heuristic_only = {}, {}
         for row in rows:
             for element in row["oracle_only"]:
@@ -422,6 +428,7 @@ def _regrets(runs, results):
             differs=sum(1 for row in rows if set(row["oracle"]) != set(row["heuristic"])),
             overran=sum(1 for row in rows if row["capacity_ms"] is not None and row["time_left_ms"] is not None
                         and row["capacity_ms"] > row["time_left_ms"]),
+            lost_share=float(np.mean(shares)) if shares else None,
             oracle_only=oracle_only, heuristic_only=heuristic_only)
     return regrets
 
@@ -462,6 +469,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
             "relevance": relevance if hybrid else None, "frames": len(run.frames),
             "mean_selected": run.mean("n_selected"),
             "regret_frames": regret.frames if regret is not None else None,
+            "regret_share": regret.lost_share if regret is not None else None,
         })
     return rows
 
@@ -827,6 +835,7 @@ SWEEP_TABLE_FORMATS = (("run", "Run", None), ("mode", "Mode", None), ("variant",
                        ("budget_at", "Budget at", ".2f"), ("budget_ms", "Budget ms", ".1f"),
                        ("mean_ms", "Mean ms", ".1f"), ("p95_ms", "p95 ms", ".1f"), ("flip", "LDR-FLIP", ".4f"),
                        ("relmse", "relMSE", ".4g"), ("psnr", "PSNR dB", ".2f"), ("regret", "Regret", ".4f"),
+                       ("regret_share", "Regret share", ".2f"),
                        ("flips_per_100", "Flips / element / 100 frames", ".2f"),
                        ("popping", "Popping / 100 frames", ".4f"), ("mean_selected", "Mean selected", ".1f"))
 
@@ -841,7 +850,8 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
         f"[{files.sweep_json.name}]({files.sweep_json.name}). Selection: the relevance (the paper's R or the "
         "error-aware one), the cost model, the selection weight I and the greedy order (the paper's R order "
         "unless 'R/ms order'). Budget at: the fraction of the way from raster to ray traced frame time the "
-        "budget was resolved from. Regret: mean over the oracle's sampled frames. Popping: summed "
+        "budget was resolved from. Regret: mean over the oracle's sampled frames; regret share: the regret as a share "
+        "of what the oracle gains over raster (see Regret against the oracle). Popping: summed "
         "popping of all flips per 100 frames (see Popping).")))
 
     by_budget = {}
@@ -875,7 +885,8 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
             regret_table.append([
                 run.label, row["variant"], _number(row["budget_ms"], ".1f"), str(regret.frames),
                 _number(regret.heuristic_flip, ".4f"), _number(regret.oracle_flip, ".4f"),
-                _number(regret.mean, ".4f"), _number(regret.max, ".4f"), str(regret.differs),
+                _number(regret.mean, ".4f"), _number(regret.max, ".4f"),
+                _number(None if regret.lost_share is None else 100.0 * regret.lost_share, ".0f"), str(regret.differs),
                 str(regret.overran), _top(regret.oracle_only), _top(regret.heuristic_only), regret.note])
         every = oracle_results.info.get("every") if oracle_results is not None else oracle.DEFAULT_EVERY
         link = (f" Per frame: [{oracle.REGRET_CSV}]({oracle.REGRET_CSV}); each candidate's measured benefit "
@@ -883,7 +894,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
         items.append(("table", _Table(
             "Regret against the oracle",
             ["Run", "Selection", "Budget ms", "Sampled frames", "Heuristic LDR-FLIP", "Oracle LDR-FLIP",
-             "Mean regret", "Max regret", "Frames the oracle chose otherwise", "Frames over T",
+             "Mean regret", "Max regret", "Lost %", "Frames the oracle chose otherwise", "Frames over T",
              "Oracle chose, heuristic did not (frames)", "Heuristic chose, oracle did not (frames)", "Note"],
             regret_table,
             f"Computed after the runs, outside every timed region. On every {every}th frame each visible "
@@ -892,6 +903,8 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
             "subset with the most benefit whose cost fits the heuristic's time left T in that frame (or, "
             "when the heuristic overran T, what its own choice cost: 'frames over T'), an exact knapsack "
             "(branch and bound), renders it and measures it: regret = LDR-FLIP(heuristic) - LDR-FLIP(oracle). "
+            "Lost %: the regret as a share of what the oracle gains over raster, averaged over the sampled "
+            "frames where it gains anything (a frame with no time left has nothing to lose). "
             "Benefits only roughly add up (a reflection may show another traced element), so a regret "
             "slightly below 0 is possible." + link)))
 
@@ -955,6 +968,11 @@ def relevance_verdict(paper, error):
     if regrets:
         text += (f"; mean regret {np.mean([a for a, _ in regrets]):.4f} (paper R) against "
                  f"{np.mean([b for _, b in regrets]):.4f} (error-aware R)")
+    shares = [(paper[f]["regret_share"], error[f]["regret_share"]) for f in shared
+              if paper[f].get("regret_share") is not None and error[f].get("regret_share") is not None]
+    if shares:
+        text += (f", losing {100 * np.mean([a for a, _ in shares]):.0f}% against "
+                 f"{100 * np.mean([b for _, b in shares]):.0f}% of what the oracle gains over raster")
     return text + ".", change
 
 

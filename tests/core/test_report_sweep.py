@@ -94,6 +94,8 @@ def test_sweep_csv_has_the_contract_columns_and_one_row_per_run(sweep):
     hybrid = next(row for row in rows if row["run"] == "arcade-path1-hybrid-at0.25-measured")
     assert float(hybrid["budget_ms"]) == 40.0 and float(hybrid["budget_at"]) == 0.25
     assert float(hybrid["mean_ms"]) == pytest.approx(42.5) and float(hybrid["regret"]) == pytest.approx(0.02)
+    # The oracle gains 0.06 - 0.01 over raster; the heuristic lost 0.02 of it.
+    assert float(hybrid["regret_share"]) == pytest.approx(0.4)
     raster = next(row for row in rows if row["mode"] == "RASTER")
     assert raster["budget_ms"] == "" and raster["regret"] == "" and float(raster["flip"]) > float(hybrid["flip"])
 

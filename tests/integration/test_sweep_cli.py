@@ -134,6 +134,7 @@ def test_render_budget_at_resolves_from_runs_beside_it_or_calibrates(blend, swee
     (["sweep", "{blend}", "--budgets", "0"], "not a count"),
     (["sweep", "{blend}", "--budget-at", "0.2,x"], "--budget-at"),
     (["sweep", "{blend}", "--budgets", "2", "--budget-at", "0.5"], "both given"),
+    (["sweep", "{blend}", "--variants", "measured,nope"], "unknown selection variant(s) nope"),
     (["sweep", "{blend}", "--path", "Nowhere", "--out", "never"], "no camera path 'Nowhere'"),
     (["sweep", "{blend}", "--frames", "3-1", "--out", "never"], "ends before it starts"),
 ])
