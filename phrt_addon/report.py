@@ -45,6 +45,7 @@ import html
 import json
 import os
 import re
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,6 +57,8 @@ MODES = ("RASTER", "HYBRID", "RAYTRACE")
 MODE_TITLES = {"RASTER": "Raster", "HYBRID": "Hybrid", "RAYTRACE": "Ray tracing"}
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
 WORST_ELEMENTS = 3
+# Frames measured at once (LDR-FLIP and EXR reading release the GIL).
+METRIC_THREADS = max(2, min(4, os.cpu_count() or 1))
 # sweep.csv: the contract's columns first, then what tells the curves apart.
 SWEEP_COLUMNS = ("run", "mode", "cost_mode", "budget_ms", "mean_ms", "p95_ms", "flip", "relmse", "psnr", "regret",
                  "flips_per_100", "popping", "scene", "path", "variant", "budget_at", "selection_weight",
@@ -249,21 +252,33 @@ def _measure_group(members, reference):
             compared.append(run)
     reference_frames = {row["frame"] for row in reference.frames}
     frames = sorted({row["frame"] for run in compared for row in run.frames} & reference_frames)
-    for frame in frames:
+
+    def measure(frame):
+        """{id(run): errors or the ValueError} of one frame (FLIP releases the GIL: frames run in parallel)."""
         reference_path = reference.image(frame)
-        pending = [run for run in compared if run.image(frame) is not None
-                   and not results[id(run)].note]
+        pending = [run for run in compared if run.image(frame) is not None]
         if reference_path is None or not pending:
-            continue
+            return {}
         reference_image = metrics.read_image(reference_path)  # unreadable: ValueError for the user
+        measured = {}
         for run in pending:
             try:
-                errors = metrics.image_errors(reference_image, metrics.read_image(run.image(frame)))
+                measured[id(run)] = metrics.image_errors(reference_image, metrics.read_image(run.image(frame)))
             except ValueError as error:
-                results[id(run)].note = f"not compared: {error}"
-                results[id(run)].per_frame.clear()
-                continue
-            results[id(run)].per_frame.append({"frame": frame, **errors})
+                measured[id(run)] = error
+        return measured
+
+    with ThreadPoolExecutor(METRIC_THREADS) as pool:
+        for frame, measured in zip(frames, pool.map(measure, frames)):
+            for run in compared:
+                outcome = results[id(run)]
+                if id(run) not in measured or outcome.note:
+                    continue
+                if isinstance(measured[id(run)], ValueError):
+                    outcome.note = f"not compared: {measured[id(run)]}"
+                    outcome.per_frame.clear()
+                    continue
+                outcome.per_frame.append({"frame": frame, **measured[id(run)]})
     for run in compared:
         outcome = results[id(run)]
         if not outcome.note:
@@ -341,7 +356,8 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
 def _measure_popping(runs, references):
     """{id(run): PoppingResult} for runs with images whose path has a reference with images."""
     pops = {}
-    reference_maps = {}
+    reference_maps = {}  # shared by the runs (threads may both compute a map: same value)
+    measured = []
     for run in runs:
         reference = references.get(run.group)
         if reference is None or not reference.has_images or not run.has_images:
@@ -349,7 +365,12 @@ def _measure_popping(runs, references):
         if run is reference:
             pops[id(run)] = popping.PoppingResult(frame_count=len(run.frames))  # the reference: 0 by definition
             continue
-        pops[id(run)] = popping.measure_popping(run.run_dir, reference.run_dir, run.selection, reference_maps)
+        measured.append((run, reference))
+    with ThreadPoolExecutor(METRIC_THREADS) as pool:
+        results = pool.map(lambda pair: popping.measure_popping(pair[0].run_dir, pair[1].run_dir, pair[0].selection,
+                                                                reference_maps), measured)
+        for (run, _), result in zip(measured, results):
+            pops[id(run)] = result
     return pops
 
 
