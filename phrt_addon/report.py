@@ -888,7 +888,8 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                 ["Selection"] + [f"at {fraction:.2f}: LDR-FLIP / regret" for fraction in fractions],
                 [[variant] + [(f"{_number(per_budget[f]['flip'], '.4f')} / {_number(per_budget[f]['regret'], '.4f')}"
                                if f in per_budget else "–") for f in fractions]
-                 for variant, per_budget in variants.items()],
+                 for variant, per_budget in sorted(variants.items(), key=lambda item: (
+                     item[0] != variant_label(BASELINE_VARIANT), item[0]))],
                 "Which part of the selection loses the error: each row changes one knob of the paper's "
                 "heuristic (the cost model, the selection weight I, the greedy order, the relevance); "
                 "columns are the budgets of the sweep.")))
