@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast test-compat bench extension scenes clean
+.PHONY: demo test test-fast test-compat bench paper extension scenes clean
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -30,6 +30,13 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m phrt.bench
+
+# The paper's experiment on both sample scenes: 2 scenes x 3 paths x 3 modes x 1000 frames at
+# 640x480, a 5-budget sweep of path1 of each, one report in out/paper/report/.  LONG: many hours
+# on 2 cores (about a second per frame); not part of `make test`.  Interrupted, it resumes:
+# complete runs are skipped.  `python -m phrt.paper --help` for a shorter one.
+paper: $(STAMP)
+	$(PY) -m phrt.paper --out out/paper
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes

@@ -4,6 +4,8 @@
     phrt render SCENE [--path NAME] [--frames A-B] [--mode raster|hybrid|raytrace]
                       [--budget-ms T] [--resolution WxH] [--out DIR] [--images exr|png|none]
     phrt report RUN_DIR... [--reference RUN_DIR] [--out DIR]
+    phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
+                     [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -46,6 +48,9 @@ def build_parser():
     render.add_argument("--frames", help="frame range A-B (default: the whole path)")
     render.add_argument("--mode", default="hybrid", type=str.lower, help="raster, hybrid or raytrace")
     render.add_argument("--budget-ms", type=_number, help="frame time budget in ms (default: the scene's)")
+    render.add_argument("--budget-at", type=_number, metavar="F",
+                        help="frame time budget F of the way from raster (0) to ray traced (1) frame time on "
+                             "this machine, from runs of the path beside --out or a short calibration")
     render.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
     render.add_argument("--out", help="run directory (default: out/<scene>-<path>-<mode>/)")
     render.add_argument("--images", default="exr", type=str.lower, help="exr, png or none")
@@ -53,7 +58,33 @@ def build_parser():
     report.add_argument("runs", nargs="+", metavar="RUN_DIR")
     report.add_argument("--reference", help="reference run (default: the raytrace run among RUN_DIRs)")
     report.add_argument("--out", default="out/report", help="report folder (default: out/report)")
+    sweep = commands.add_parser("sweep", help="error against run time: raster, raytrace and hybrid at N budgets")
+    sweep.add_argument("scene", help="a .blend file or a sample scene name (arcade, atrium)")
+    sweep.add_argument("--path", help="camera path (camera object) to replay (default: the scene's first)")
+    sweep.add_argument("--frames", help="frame range A-B (default: the whole path)")
+    sweep.add_argument("--budgets", type=_count, default=None,
+                       help="hybrid budgets spread evenly between raster and ray traced frame time (default 5)")
+    sweep.add_argument("--budget-at", metavar="F[,F...]",
+                       help="the hybrid budgets as fractions of the way from raster (0) to ray traced (1) frame "
+                            "time, instead of --budgets")
+    sweep.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
+    sweep.add_argument("--out", help="sweep folder (default: out/<scene>-<path>-sweep/)")
+    sweep.add_argument("--oracle-every", type=_count, default=None, metavar="K",
+                       help="the oracle judges every K-th frame (default 8)")
+    sweep.add_argument("--variants", metavar="NAME[,NAME...]",
+                       help="selection variants of the hybrid runs (default all: measured, papercost, i0, i0.1, "
+                            "rperms, error)")
     return parser
+
+
+def _count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a count >= 1")
+    return value
 
 
 def _number(text):
@@ -64,6 +95,13 @@ def _number(text):
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
     return value
+
+
+def check_budget_at(fraction):
+    """UserError unless ``fraction`` is None or within 0..1."""
+    if fraction is not None and not 0.0 <= fraction <= 1.0:
+        raise UserError(f"--budget-at {fraction:g} is outside 0..1: give the fraction of the way from raster (0) "
+                        f"to ray traced (1) frame time, e.g. --budget-at 0.33")
 
 
 def parse_resolution(text):
@@ -206,6 +244,9 @@ def command_render(args):
         raise UserError(f"unknown image format '{args.images}': use exr, png or none")
     if args.budget_ms is not None and args.budget_ms < 0:
         raise UserError(f"negative budget {args.budget_ms:g} ms: give --budget-ms a value >= 0")
+    check_budget_at(args.budget_at)
+    if args.budget_ms is not None and args.budget_at is not None:
+        raise UserError("--budget-ms and --budget-at both given: give the budget one way")
     resolution = parse_resolution(args.resolution)
     if args.frames is not None:
         try:
@@ -230,11 +271,15 @@ def command_render(args):
         with _quiet_stdout():
             result = replay_module.replay(scene, camera, frame_range, args.mode, out, images=args.images,
                                           budget_ms=args.budget_ms, resolution=resolution, scene_label=label,
-                                          on_progress=progress)
+                                          on_progress=progress, budget_at=args.budget_at)
     except replay_module.ReplayError as error:
         raise UserError(str(error)) from None
     summary = result.summary or {}
     total = summary.get("total_ms", {})
+    source = summary.get("budget_source")
+    if source:
+        print(f"phrt: budget at {source['budget_at']:g} = {source['budget_ms']:.0f} ms (raster {source['raster_ms']:.0f}"
+              f" ms, ray traced {source['raytrace_ms']:.0f} ms, from {source['method']})")
     print(f"phrt: {label}/{camera.name} {args.mode}: {result.frames_done} frames in "
           f"{time.perf_counter() - started:.1f} s, mean {total.get('mean', float('nan')):.0f} ms/frame "
           f"(p95 {total.get('p95', float('nan')):.0f}), budget {summary.get('budget_ms', 0):g} ms -> {out}")
@@ -266,6 +311,94 @@ def _quiet_exit():
     os.close(devnull)
 
 
+def _budget_fractions(args):
+    """The sweep's budget fractions from --budget-at or --budgets (UserError if both or malformed)."""
+    from .phrt_addon import plan as plan_module
+    if args.budget_at is not None and args.budgets is not None:
+        raise UserError("--budgets and --budget-at both given: give the hybrid budgets one way")
+    if args.budget_at is None:
+        return plan_module.budget_fractions(args.budgets or plan_module.DEFAULT_BUDGETS)
+    fractions = []
+    for part in str(args.budget_at).split(","):
+        try:
+            value = _number(part.strip())
+        except argparse.ArgumentTypeError as error:
+            raise UserError(f"--budget-at: {error}; give fractions like 0.25,0.5") from None
+        check_budget_at(value)
+        fractions.append(value)
+    return sorted(set(fractions))
+
+
+def command_sweep(args):
+    from .engine import replay as replay_module
+    from .engine import sweep as sweep_engine
+    from .phrt_addon import oracle as oracle_module
+    from .phrt_addon import plan as plan_module
+    from .phrt_addon import report
+    fractions = _budget_fractions(args)
+    variants = tuple(plan_module.VARIANTS)
+    if args.variants is not None:
+        variants = tuple(dict.fromkeys(name.strip() for name in args.variants.split(",") if name.strip()))
+        unknown = [name for name in variants if name not in plan_module.VARIANTS]
+        if unknown or not variants:
+            raise UserError(f"unknown selection variant(s) {', '.join(unknown) or repr(args.variants)}: use some of "
+                            f"{', '.join(plan_module.VARIANTS)}")
+    resolution = parse_resolution(args.resolution)
+    if args.frames is not None:
+        try:
+            replay_module.parse_frames(args.frames, (1, 1))
+        except replay_module.ReplayError as error:
+            raise UserError(str(error)) from None
+    if args.out is not None:
+        _check_output_dir(args.out)
+    label = load_scene(args.scene)
+    import bpy
+    scene = bpy.context.scene
+    try:
+        camera = replay_module.find_path(scene, args.path)
+        frame_range = replay_module.parse_frames(args.frames, replay_module.path_frame_range(scene, camera))
+    except replay_module.ReplayError as error:
+        raise UserError(str(error)) from None
+    from .engine import extract
+    resolution = resolution or extract.resolution(scene)
+    folder = Path(args.out) if args.out else Path("out") / f"{label}-{camera.name}-sweep"
+    _check_output_dir(folder)
+    scene_ref = args.scene if Path(args.scene).suffix.lower() != ".blend" else str(Path(args.scene).resolve())
+    plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
+                                  oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
+    plan_path = plan_module.write_plan(plan, folder)
+    started = time.perf_counter()
+    total = len(plan.jobs)
+    print(f"phrt: sweep of {label}/{camera.name} frames {frame_range[0]}-{frame_range[1]} at "
+          f"{resolution[0]}x{resolution[1]}: {len(plan.runs)} runs and the oracle -> {plan_path}", flush=True)
+
+    def show(outcome, counter=[0]):
+        counter[0] += 1
+        line = f"phrt: [{counter[0]}/{total}] {outcome.job_id}: {outcome.status}"
+        if outcome.status == "done":
+            line += f" in {outcome.seconds:.1f} s ({outcome.message})"
+        elif outcome.message and outcome.status == "failed":
+            line += f": {outcome.message}"
+        print(line, file=sys.stderr if outcome.status == "failed" else sys.stdout, flush=True)
+
+    outcomes = plan_module.LocalExecutor().run(plan_path, plan, sweep_engine.execute_job, on_outcome=show)
+    complete = [folder / job.id for job in plan.runs if plan_module.run_is_complete(folder / job.id, plan)]
+    failed = [outcome for outcome in outcomes if outcome.status == "failed"]
+    if complete:
+        try:
+            files = report.build_report(complete, out_dir=folder / plan_module.REPORT_DIR,
+                                        oracle_dir=folder / oracle_module.ORACLE_DIR)
+        except ValueError as error:
+            print(f"phrt: no report: {str(error).splitlines()[0]}", file=sys.stderr)
+        else:
+            print(f"phrt: sweep report {files.markdown} ({files.sweep_csv.name}, {files.error_vs_time_png.name}); "
+                  f"{len(complete)} runs in {time.perf_counter() - started:.0f} s")
+    if failed:
+        print(f"phrt: {len(failed)} of {total} jobs failed: {', '.join(o.job_id for o in failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def main(argv=None):
     as_program = argv is None  # the `phrt` program itself: its stdout ends with its last line
     argv = sys.argv[1:] if argv is None else argv
@@ -273,7 +406,8 @@ def main(argv=None):
         args = build_parser().parse_args(argv)
         if args.command != "report":  # every other command runs Blender
             _import_blender()
-        command = {"scenes": command_scenes, "render": command_render, "report": command_report}[args.command]
+        command = {"scenes": command_scenes, "render": command_render, "report": command_report,
+                   "sweep": command_sweep}[args.command]
         return command(args)
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)

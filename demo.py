@@ -1,14 +1,18 @@
 """``make demo``: what PHRT does, in a few minutes on a 2-core machine without a GPU.
 
 1. Renders one frame of a small scene built in code (floor, red cube, mirror
-   sphere, glass slab, fence, sun and lamp) in hybrid mode and writes
+   sphere, glass slab, fence, sun and lamp) in hybrid mode, its budget 40% of the
+   way from raster to ray traced time on this machine, and writes
    ``out/demo/showcase.png`` and a multilayer ``showcase.exr`` with every pass.
-2. Builds the sample scenes if needed, replays the first frames of the
-   ``arcade`` scene's ``path1`` in raster, hybrid and raytrace modes
-   (CONTRACT.md section 4 run directories under ``out/demo/``), and writes the
-   report (section 5) to ``out/demo/report/``.
+2. Builds the sample scenes if needed and runs a short sweep of the ``arcade``
+   scene's ``path1`` (``phrt sweep``: raster, raytrace, then hybrid at 3 budgets
+   between them in every selection variant, and the oracle), each run a
+   CONTRACT.md section 4 run directory under ``out/demo/``, and the report
+   (section 5, with the error-time curve, Table II, regret and popping) in
+   ``out/demo/report/``.
 
-    python -m phrt.demo [--out out/demo] [--scene arcade] [--path path1] [--frames 1-48]
+    python -m phrt.demo [--out out/demo] [--scene arcade] [--path path1] [--frames 1-24]
+                        [--resolution 320x240] [--budgets 3]
 """
 from __future__ import annotations
 
@@ -17,6 +21,12 @@ import sys
 import time
 from pathlib import Path
 
+# The demo's sweep: short and small enough for 10 minutes on 2 cores (20 runs and the oracle).
+DEMO_FRAMES = "1-24"
+DEMO_RESOLUTION = "320x240"
+DEMO_BUDGETS = 3
+SHOWCASE_BUDGET_AT = 0.4
+
 
 def _render_showcase(bpy, out: Path):
     from . import compat
@@ -24,7 +34,8 @@ def _render_showcase(bpy, out: Path):
     from .sample_scenes import showcase
     scene = showcase.build_showcase(640, 480)
     scene.phrt.mode = "HYBRID"
-    scene.phrt.budget_ms = 1000.0
+    scene.phrt.use_budget_at = True
+    scene.phrt.budget_at = SHOWCASE_BUDGET_AT
     render = scene.render
     settings = render.image_settings
     timings = []
@@ -39,10 +50,11 @@ def _render_showcase(bpy, out: Path):
         bpy.ops.render.render(write_still=True)
         timings.append(dict(final.LAST_FRAME["stats"]))
     stats = timings[-1]  # the warm frame
-    return (f"showcase frame (640x480, hybrid, warm): total {stats['total_ms']:.0f} ms = raster {stats['raster_ms']:.0f}"
-          f" + select {stats['select_ms']:.0f} + trace {stats['trace_ms']:.0f} + composite "
-          f"{stats['composite_ms']:.0f} ms; {stats['n_selected']}/{stats['n_visible']} elements traced, "
-          f"{stats['rays']} rays\n  wrote {out / 'showcase.png'} and {out / 'showcase.exr'}")
+    return (f"showcase frame (640x480, hybrid, budget at {SHOWCASE_BUDGET_AT:g} = {stats['budget_ms']:.0f} ms, warm): "
+            f"total {stats['total_ms']:.0f} ms = raster {stats['raster_ms']:.0f}"
+            f" + select {stats['select_ms']:.0f} + trace {stats['trace_ms']:.0f} + composite "
+            f"{stats['composite_ms']:.0f} ms; {stats['n_selected']}/{stats['n_visible']} elements traced, "
+            f"{stats['rays']} rays\n  wrote {out / 'showcase.png'} and {out / 'showcase.exr'}")
 
 
 def main(argv=None):
@@ -50,8 +62,9 @@ def main(argv=None):
     parser.add_argument("--out", default="out/demo")
     parser.add_argument("--scene", default="arcade")
     parser.add_argument("--path", default="path1")
-    parser.add_argument("--frames", default="1-48")
-    parser.add_argument("--resolution", default=None, help="WxH (default: the scene's, 640x480)")
+    parser.add_argument("--frames", default=DEMO_FRAMES)
+    parser.add_argument("--resolution", default=DEMO_RESOLUTION, help=f"WxH (default {DEMO_RESOLUTION})")
+    parser.add_argument("--budgets", default=DEMO_BUDGETS, type=int)
     args = parser.parse_args(argv)
     started = time.perf_counter()
     out = Path(args.out)
@@ -61,32 +74,13 @@ def main(argv=None):
     bpy = cli._blender()
     with cli._quiet_stdout():
         line = _render_showcase(bpy, out)
-    print(line)
+    print(line, flush=True)
 
-    from .engine import replay
-    from .phrt_addon import report
-    label = cli.load_scene(args.scene)
-    scene = bpy.context.scene
-    camera = replay.find_path(scene, args.path)
-    frame_range = replay.parse_frames(args.frames, replay.path_frame_range(scene, camera))
-    resolution = cli.parse_resolution(args.resolution)
-    run_dirs = []
-    for mode in ("RAYTRACE", "HYBRID", "RASTER"):
-        run_dir = replay.default_run_dir(out, label, camera.name, mode)
-        progress = cli._progress(sys.stderr)
-        begin = time.perf_counter()
-        with cli._quiet_stdout():
-            result = replay.replay(scene, camera, frame_range, mode, run_dir, images="exr",
-                                   resolution=resolution, scene_label=label, on_progress=progress)
-        total = result.summary["total_ms"]
-        print(f"{label}/{camera.name} {mode.lower():8s}: {result.frames_done} frames in "
-              f"{time.perf_counter() - begin:5.1f} s, mean {total['mean']:.0f} ms/frame (p95 {total['p95']:.0f}), "
-              f"budget {result.summary['budget_ms']:g} ms -> {run_dir}")
-        run_dirs.append(run_dir)
-    files = report.build_report(run_dirs, out_dir=out / "report")
-    print(f"report: {files.markdown}  {files.html}")
+    status = cli.main(["sweep", args.scene, "--path", args.path, "--frames", args.frames, "--budgets",
+                       str(args.budgets), "--resolution", args.resolution, "--out", str(out)])
+    print(f"report: {out / 'report' / 'report.md'}  {out / 'report' / 'report.html'}")
     print(f"demo finished in {time.perf_counter() - started:.0f} s")
-    return 0
+    return status
 
 
 if __name__ == "__main__":

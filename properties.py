@@ -105,6 +105,39 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
         description="Frame time target in milliseconds; the heuristic fits ray tracing into what raster leaves",
         default=defaults.BUDGET_MS, min=0.0, soft_max=1000.0,
     )
+    use_budget_at: BoolProperty(
+        name="Budget Between Modes",
+        description="Give the budget as a fraction of the way from this machine's raster to its ray traced "
+                    "frame time (Budget At) instead of milliseconds; replays resolve it from a short "
+                    "calibration or from earlier runs of the path",
+        default=False,
+    )
+    budget_at: FloatProperty(
+        name="Budget At",
+        description="Frame budget as a fraction of the way from raster (0) to ray traced (1) frame time "
+                    "on this machine",
+        default=defaults.BUDGET_AT, min=0.0, max=1.0, subtype="FACTOR",
+    )
+    relevance: EnumProperty(
+        name="Relevance",
+        description="What the heuristic's relevance R weighs: the paper's visibility, or visibility times "
+                    "how much tracing the element changes its pixels",
+        items=(
+            ("PAPER", "Paper", "R = (S * I + V) * K, the paper's equation (3)", 0),
+            ("ERROR", "Error-Aware", "V weighted by a running estimate of the element's traced-vs-raster "
+                                     "difference per pixel (a prior from its material before it is traced)", 1),
+        ),
+        default="PAPER",
+    )
+    selection_order: EnumProperty(
+        name="Greedy Order",
+        description="Order in which the selection pass takes elements that fit the time left",
+        items=(
+            ("RELEVANCE", "Relevance", "The paper's: the most relevant element first", 0),
+            ("RELEVANCE_PER_MS", "Relevance per ms", "Relevance divided by the predicted milliseconds first", 1),
+        ),
+        default="RELEVANCE",
+    )
     selection_weight: FloatProperty(
         name="Selection Weight (I)",
         description="The paper's I: relevance bonus of an element selected last frame, which keeps elements "

@@ -13,6 +13,7 @@ PASSES = (
     ("Normal", 3, "XYZ", "VECTOR"),
     ("PHRT Selected", 1, "X", "VALUE"),
     ("PHRT Candidate", 1, "X", "VALUE"),
+    ("PHRT Element", 1, "X", "VALUE"),  # front element index + 1, 0 where none (popping, report)
 )
 
 

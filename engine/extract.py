@@ -171,7 +171,9 @@ def read_settings(scene) -> Settings:
         return Settings()
     return Settings(mode=props.mode, budget_ms=float(props.budget_ms), selection_weight=float(props.selection_weight),
                     max_area_fraction=float(props.max_area_fraction), max_bounces=int(props.max_bounces),
-                    cost_mode=props.cost_mode, shadow_map_size=int(props.shadow_map_size))
+                    cost_mode=props.cost_mode, shadow_map_size=int(props.shadow_map_size),
+                    budget_at=float(props.budget_at) if props.use_budget_at else None,
+                    relevance=props.relevance, selection_order=props.selection_order)
 
 
 def resolution(scene):

@@ -131,10 +131,11 @@ class FinalRender:
                 "Normal": passes.normal,
                 "PHRT Selected": passes.selected,
                 "PHRT Candidate": passes.candidate,
+                "PHRT Element": passes.element,
             }
             for name, array in arrays.items():
                 render_pass = layer.passes.find_by_name(name, "")
-                if render_pass is None:
+                if render_pass is None or array is None:
                     continue
                 flat = np.ascontiguousarray(np.nan_to_num(array), dtype=np.float32).ravel()
                 expected = width * height * render_pass.channels

@@ -243,6 +243,7 @@ class GPUResources:
         "transparent_element": "R32UI", "transparent_depth": "DEPTH_COMPONENT32F",
         "normal_depth": "RGBA32F", "front_element": "R32UI",
         "opaque_light": "RGBA32F", "transparent_light": "RGBA32F", "combined": "RGBA32F",
+        "shadow_change": "RGBA32F", "traced_change": "RGBA32F",  # the error-aware relevance only
     }
 
     def target(self, name: str, size) -> object | None:

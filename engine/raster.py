@@ -87,6 +87,7 @@ class GPUFrame:
         self._gbuffer = None
         self._transparent_drawn = False
         self.read_combined = True  # False: shade() leaves the image on the GPU (the viewport draws it)
+        self._measure = False
 
     # -- protocol --------------------------------------------------------------
     def draw(self):
@@ -138,6 +139,13 @@ class GPUFrame:
                                     view_depth=self.view_depth)
         return self._gbuffer
 
+    def traced_change(self) -> np.ndarray:
+        """(h, w, 4) of the last ``shade(..., measure_change=True)``: x the luminance of what traced
+        reflections and refractions changed, y what traced shadows changed (clipped to [0, 1])."""
+        gpu = gpu_module()
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(self.targets["traced_change"],))
+        return self._read(gpu, framebuffer, 0, "FLOAT", 4)
+
     def read_albedo(self):
         """(opaque, transparent) albedo + metallic, (h, w, 4): only the reference lighting needs them."""
         gpu = gpu_module()
@@ -150,13 +158,15 @@ class GPUFrame:
             result.append(stored)
         return tuple(result)
 
-    def shade(self, traced) -> np.ndarray | None:
+    def shade(self, traced, measure_change: bool = False) -> np.ndarray | None:
         """Deferred lighting and composite with the tracer's results; returns Combined (h, w, 4),
-        or None when ``read_combined`` is off (the frame target "combined" holds it)."""
+        or None when ``read_combined`` is off (the frame target "combined" holds it).
+        ``measure_change``: also write what the traced terms changed (``traced_change``)."""
         gpu = gpu_module()
         start = time.perf_counter()
         uploads = self._upload_traced(gpu, traced)
         self.stats["traced_upload_ms"] = _ms(start)
+        self._measure = bool(measure_change)
         self._light(gpu, uploads)
         combined = self._composite(gpu, uploads)
         self.stats["lighting_ms"] = _ms(start)
@@ -407,7 +417,10 @@ class GPUFrame:
 
     def _light(self, gpu, uploads):
         targets = self.targets
-        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(targets["opaque_light"], targets["transparent_light"]))
+        slots = (targets["opaque_light"], targets["transparent_light"])
+        if self._measure:
+            slots += (targets["shadow_change"],)  # without the attachment, out_change is discarded
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=slots)
         with framebuffer.bind():
             framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
         lights = self.snapshot.lights
@@ -426,6 +439,7 @@ class GPUFrame:
                 shader.uniform_block("camera", camera_ubo)
                 self._bind_layers(shader)
                 shader.uniform_sampler("material_table", self.material_table)
+                shader.uniform_int("measure_change", int(self._measure))
                 batch = self.resources.fullscreen_batch(shader)
                 for index, light in enumerate(lights):
                     values = self._light_ubo(gpu, index, light)
@@ -445,7 +459,8 @@ class GPUFrame:
 
     def _composite(self, gpu, uploads) -> np.ndarray:
         targets = self.targets
-        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(targets["combined"],))
+        slots = (targets["combined"], targets["traced_change"]) if self._measure else (targets["combined"],)
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=slots)
         flags = (float("opaque" in uploads["reflection"]), float("transparent" in uploads["reflection"]),
                  float(uploads["refraction"] is not None))
         camera_ubo = self._camera_ubo(gpu, flags)
@@ -460,6 +475,8 @@ class GPUFrame:
             shader.uniform_sampler("opaque_reflection", uploads["reflection"].get("opaque", empty))
             shader.uniform_sampler("transparent_reflection", uploads["reflection"].get("transparent", empty))
             shader.uniform_sampler("refraction", uploads["refraction"] or empty)
+            shader.uniform_sampler("shadow_change", targets["shadow_change"] if self._measure else empty)
+            shader.uniform_int("measure_change", int(self._measure))
 
         gpu.state.blend_set("NONE")
         self._fullscreen(gpu, "composite", framebuffer, bind)

@@ -22,7 +22,9 @@ from .. import compat
 from ..phrt_addon import runlog
 from . import extract, final
 
-MODES = ("RASTER", "HYBRID", "RAYTRACE")
+# Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
+# from the raster and raytrace runs it has just written beside the hybrid one (no calibration).
+MODES = ("RASTER", "RAYTRACE", "HYBRID")
 IMAGE_FORMATS = ("exr", "png", "none")
 
 
@@ -128,7 +130,8 @@ class SteppedReplay:
     stopped) leaves the run open for ``finish(cancelled=True)``."""
 
     def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
-                 resolution=None, scene_label=None):
+                 resolution=None, scene_label=None, budget_at=None, budget_search_dirs=None,
+                 overrides=None, frame_list=None):
         mode = mode.upper()
         if mode not in MODES:
             raise ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in MODES)}")
@@ -139,6 +142,25 @@ class SteppedReplay:
         start, end = frame_range
         if end < start:
             raise ReplayError(f"frame range {start}-{end} ends before it starts")
+        if budget_at is not None and not 0.0 <= budget_at <= 1.0:
+            raise ReplayError(f"budget-at must be a fraction within 0..1 (0 = raster, 1 = ray traced frame "
+                              f"time), not {budget_at}")
+        settings = extract.read_settings(scene)
+        for key, value in (overrides or {}).items():
+            if not hasattr(settings, key):
+                raise ReplayError(f"unknown setting '{key}'")
+            setattr(settings, key, value)
+        # A budget between the modes is resolved to milliseconds once, before the first frame.
+        fraction = budget_at if budget_at is not None else settings.budget_at
+        settings.budget_at = None
+        budget_source = None
+        if budget_ms is None and fraction is not None and mode == "HYBRID":
+            from . import budget as budget_module
+            resolved = budget_module.resolve(
+                scene, camera, frame_range, fraction, resolution=resolution, scene_label=scene_label,
+                search_dirs=[Path(run_dir).parent] if budget_search_dirs is None else budget_search_dirs)
+            budget_ms = resolved.budget_ms
+            budget_source = resolved.as_summary()
         self.run_dir = Path(run_dir)
         self.frames_dir = self.run_dir / runlog.FRAMES_DIR
         try:
@@ -150,9 +172,9 @@ class SteppedReplay:
             raise ReplayError(f"cannot write to output folder '{self.run_dir}': "
                                      f"{error.strerror or error}") from None
         self.scene, self.mode, self.images = scene, mode, images
-        self.frames = list(range(start, end + 1))
+        self.frames = list(range(start, end + 1)) if frame_list is None else [int(f) for f in frame_list]
         self.done = 0
-        self.settings = extract.read_settings(scene)
+        self.settings = settings
         self.settings.mode = mode
         if budget_ms is not None:
             self.settings.budget_ms = float(budget_ms)
@@ -174,7 +196,11 @@ class SteppedReplay:
             "scene": scene_label or scene.name, "path": camera.name, "resolution": [width, height],
             "images": images, "frame_range": [start, end], "cost_mode": self.settings.cost_mode,
             "selection_weight": self.settings.selection_weight,
-            "max_area_fraction": self.settings.max_area_fraction, **versions()}
+            "max_area_fraction": self.settings.max_area_fraction,
+            "relevance": str(self.settings.relevance).lower(),
+            "selection_order": str(self.settings.selection_order).lower(),
+            "budget_at": fraction if mode == "HYBRID" and budget_source is not None else None,
+            "budget_source": budget_source, **versions()}
         self.log = runlog.RunLog(self.run_dir, extra_frame_columns=EXTRA_FRAME_COLUMNS)
         self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
         self._open = True
@@ -256,13 +282,19 @@ class SteppedReplay:
 
 
 def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None, resolution=None,
-           scene_label=None, on_progress=None, should_stop=None) -> ReplayResult:
+           scene_label=None, on_progress=None, should_stop=None, budget_at=None, budget_search_dirs=None,
+           overrides=None) -> ReplayResult:
     """Render ``frame_range`` of ``camera`` in ``mode`` into ``run_dir``.
 
     ``on_progress(done, total, frame_ms)`` is called after each frame;
-    ``should_stop()`` is polled between frames (Esc in the UI)."""
+    ``should_stop()`` is polled between frames (Esc in the UI).  ``budget_at`` (or the
+    scene's Budget At) is resolved to milliseconds from complete raster and raytrace runs of
+    the path in ``budget_search_dirs`` (default: beside ``run_dir``) or by a short
+    calibration, reported in ``summary.json`` (``budget_source``).  ``overrides`` sets
+    fields of the scene's settings (``phrt_addon.scene.Settings``) for this replay only."""
     run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
-                        resolution=resolution, scene_label=scene_label)
+                        resolution=resolution, scene_label=scene_label, budget_at=budget_at,
+                        budget_search_dirs=budget_search_dirs, overrides=overrides)
     cancelled = False
     while run.remaining:
         if should_stop is not None and should_stop():

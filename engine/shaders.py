@@ -78,6 +78,7 @@ void main() {
 COMMON_LIB = """
 #define PHRT_INV_PI 0.3183098861837907
 #define PHRT_MIN_ROUGHNESS 0.04
+#define PHRT_LUMINANCE vec3(0.2126, 0.7152, 0.0722)
 
 struct Surface {
   bool covered;
@@ -246,17 +247,29 @@ vec3 incidence(vec3 position, out vec3 direction) {
   return color * (intensity / (dist * dist + radius * radius));
 }
 
-vec3 light_layer(Surface s, float override_visibility) {
+/* One light at one layer's surface; with ``measure_change`` where the tracer replaced the
+   shadow map, ``change`` gains the luminance of what that changed (the error-aware relevance). */
+vec3 light_layer(Surface s, float traced_visibility, inout float change) {
   if (!s.covered) { return vec3(0.0); }
   vec3 direction;
   vec3 irradiance = incidence(s.position, direction);
   vec3 response = brdf_cosine(s, direction);
   if (response == vec3(0.0)) { return vec3(0.0); }
+  vec3 unshadowed = response * irradiance;
   float visibility = 1.0;
   if (light.spot.z > 0.5) {
-    visibility = override_visibility >= 0.0 ? override_visibility : shadow_lit(s.position, s.normal);
+    if (traced_visibility >= 0.0) {
+      visibility = traced_visibility;
+      if (measure_change != 0) {
+        float mapped = shadow_lit(s.position, s.normal);
+        change += min(dot(abs(unshadowed * (traced_visibility - mapped)), PHRT_LUMINANCE), 1.0);
+      }
+    }
+    else {
+      visibility = shadow_lit(s.position, s.normal);
+    }
   }
-  return response * irradiance * visibility;
+  return unshadowed * visibility;
 }
 
 void main() {
@@ -265,20 +278,23 @@ void main() {
   int traced = int(light.spot.w + 0.5);
   out_opaque = vec4(0.0);
   out_transparent = vec4(0.0);
+  float change = 0.0;
   /* A layer's other targets are read only where it covers the pixel (the transparent layer
      rarely does). */
   vec4 position = texelFetch(opaque_position, pixel, 0);
   if (position.w > 0.5) {
     Surface opaque = read_surface(position, texelFetch(opaque_normal, pixel, 0), texelFetch(opaque_albedo, pixel, 0));
-    out_opaque.rgb = light_layer(opaque, (traced & 1) != 0 ? texelFetch(opaque_visibility, pixel, 0).r : -1.0);
+    out_opaque.rgb = light_layer(opaque, (traced & 1) != 0 ? texelFetch(opaque_visibility, pixel, 0).r : -1.0,
+                                 change);
   }
   position = texelFetch(transparent_position, pixel, 0);
   if (position.w > 0.5) {
     Surface transparent = read_surface(position, texelFetch(transparent_normal, pixel, 0),
                                        texelFetch(transparent_albedo, pixel, 0));
     out_transparent.rgb = light_layer(transparent, (traced & 2) != 0 ? texelFetch(transparent_visibility, pixel, 0).r
-                                                                     : -1.0);
+                                                                     : -1.0, change);
   }
+  out_change = vec4(0.0, change, 0.0, 0.0);
 }
 """
 
@@ -314,36 +330,51 @@ vec3 shade_layer(Surface s, vec3 lights, vec4 traced_reflection, out float trans
   return color + reflect_weight * reflected;
 }
 
-void main() {
-  ivec2 pixel = ivec2(gl_FragCoord.xy);
-  Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),
-                                texelFetch(opaque_albedo, pixel, 0));
+/* The pixel's colour with the traced terms (``use_traced``) or the raster ones. */
+vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_traced) {
   vec3 image = camera.world.rgb;
   float transmissive;
   float fresnel_t;
   vec4 no_trace = vec4(0.0);
   if (opaque.covered) {
-    vec4 traced = camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : no_trace;
+    vec4 traced = use_traced && camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : no_trace;
     image = shade_layer(opaque, texelFetch(opaque_light, pixel, 0).rgb, traced, transmissive, fresnel_t);
   }
-  Surface transparent = read_surface(texelFetch(transparent_position, pixel, 0),
-                                     texelFetch(transparent_normal, pixel, 0),
-                                     texelFetch(transparent_albedo, pixel, 0));
   if (transparent.covered) {
-    vec4 traced = camera.traced.y > 0.5 ? texelFetch(transparent_reflection, pixel, 0) : no_trace;
+    vec4 traced = use_traced && camera.traced.y > 0.5 ? texelFetch(transparent_reflection, pixel, 0) : no_trace;
     vec3 surface_color = shade_layer(transparent, texelFetch(transparent_light, pixel, 0).rgb, traced,
                                      transmissive, fresnel_t);
-    /* Raster: straight through, no bending; traced: the refracted radiance. */
+    /* The transmitted part: straight through in raster, the refracted radiance where traced;
+       the 1 - alpha part goes straight on (as the tracer's alpha pass-through does). */
     vec3 behind = image;
-    if (camera.traced.z > 0.5) {
-      vec4 refracted = texelFetch(refraction, pixel, 0);
-      if (refracted.a > 0.5) { behind = refracted.rgb; }
+    vec3 refracted = image;
+    if (use_traced && camera.traced.z > 0.5) {
+      vec4 traced_refraction = texelFetch(refraction, pixel, 0);
+      if (traced_refraction.a > 0.5) { refracted = traced_refraction.rgb; }
     }
-    vec3 transmitted = (transmissive * (1.0 - fresnel_t)) * transparent.albedo * behind;
+    vec3 transmitted = (transmissive * (1.0 - fresnel_t)) * transparent.albedo * refracted;
     float alpha = transparent.alpha_blend;
     image = alpha * (surface_color + transmitted) + (1.0 - alpha) * behind;
   }
-  out_combined = vec4(finite_radiance(image), 1.0);
+  return finite_radiance(image);
+}
+
+void main() {
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),
+                                texelFetch(opaque_albedo, pixel, 0));
+  Surface transparent = read_surface(texelFetch(transparent_position, pixel, 0),
+                                     texelFetch(transparent_normal, pixel, 0),
+                                     texelFetch(transparent_albedo, pixel, 0));
+  vec3 image = composite_pixel(pixel, opaque, transparent, true);
+  out_combined = vec4(image, 1.0);
+  out_change = vec4(0.0);
+  if (measure_change != 0) {
+    /* What the traced reflections and refractions changed (x) and the traced shadows (y). */
+    vec3 raster = composite_pixel(pixel, opaque, transparent, false);
+    out_change = vec4(min(dot(abs(image - raster), PHRT_LUMINANCE), 1.0),
+                      min(texelFetch(shadow_change, pixel, 0).y, 1.0), 0.0, 0.0);
+  }
 }
 """
 
@@ -445,9 +476,11 @@ def build_lighting(gpu, normal_offset_texels, depth_bias_texels):
     info.sampler(slot + 2, "FLOAT_2D", "opaque_visibility")
     info.sampler(slot + 3, "FLOAT_2D", "transparent_visibility")
     _defines(info, normal_offset_texels, depth_bias_texels)
+    info.push_constant("INT", "measure_change")
     info.vertex_in(0, "VEC2", "pos")
     info.fragment_out(0, "VEC4", "out_opaque")
     info.fragment_out(1, "VEC4", "out_transparent")
+    info.fragment_out(2, "VEC4", "out_change")
     info.vertex_source(FULLSCREEN_VERT)
     info.fragment_source(COMMON_LIB + LIGHTING_FRAG)
     return gpu.shader.create_from_info(info)
@@ -472,11 +505,13 @@ def build_composite(gpu, normal_offset_texels, depth_bias_texels):
     info.uniform_buf(0, "CameraData", "camera")
     slot = _layer_samplers(info, 0)
     for offset, name in enumerate(("material_table", "opaque_light", "transparent_light", "opaque_reflection",
-                                   "transparent_reflection", "refraction")):
+                                   "transparent_reflection", "refraction", "shadow_change")):
         info.sampler(slot + offset, "FLOAT_2D", name)
     _defines(info, normal_offset_texels, depth_bias_texels)
+    info.push_constant("INT", "measure_change")
     info.vertex_in(0, "VEC2", "pos")
     info.fragment_out(0, "VEC4", "out_combined")
+    info.fragment_out(1, "VEC4", "out_change")
     info.vertex_source(FULLSCREEN_VERT)
     info.fragment_source(COMMON_LIB + COMPOSITE_FRAG)
     return gpu.shader.create_from_info(info)

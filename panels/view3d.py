@@ -121,10 +121,16 @@ class PHRT_PT_renderer(PHRT_Panel, bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         column = layout.column()
-        row = column.row(align=True)
-        row.prop(settings, "budget_ms", text="Budget (ms)")
-        row.label(text=frame_rate_text(settings.budget_ms))
+        column.prop(settings, "use_budget_at")
+        if settings.use_budget_at:
+            column.prop(settings, "budget_at", text="Budget At (raster 0, ray traced 1)")
+        else:
+            row = column.row(align=True)
+            row.prop(settings, "budget_ms", text="Budget (ms)")
+            row.label(text=frame_rate_text(settings.budget_ms))
         column.prop(settings, "selection_weight", text="Selection Weight I")
+        column.prop(settings, "relevance")
+        column.prop(settings, "selection_order")
         column.prop(settings, "max_area_fraction", text="Max Area (of frame)")
         column.prop(settings, "max_bounces")
         column.prop(settings, "cost_mode")

@@ -33,7 +33,7 @@ from typing import Protocol
 
 import numpy as np
 
-from . import heuristic, shading
+from . import benefit, heuristic, shading
 from .cost_model import CostModel, FrameStats
 from .gbuffer import GBuffer, element_pixel_stats
 from .scene import SceneSnapshot
@@ -55,7 +55,12 @@ class RasterFrame(Protocol):
 
     def gbuffer(self) -> GBuffer: ...
 
-    def shade(self, traced: "TracedTerms | None") -> np.ndarray | None: ...
+    def shade(self, traced: "TracedTerms | None", measure_change: bool = False) -> np.ndarray | None: ...
+
+    def traced_change(self) -> np.ndarray:
+        """(h, w, 4) after ``shade(..., measure_change=True)``: per pixel, the luminance (clipped
+        to [0, 1]) of what the traced reflections and refractions (x) and the traced shadows (y)
+        changed against the raster image."""
 
 
 @dataclass
@@ -77,6 +82,8 @@ class FramePasses:
     normal: np.ndarray  # (h,w,3) float32
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
+    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
+    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
 
 
 @dataclass
@@ -150,6 +157,10 @@ class FrameRenderer:
         self.trace_scene = None
         self.frames_rendered = 0
         self.element_bounds = ElementBounds()
+        # The error-aware relevance's per-element estimates (phrt_addon/benefit.py).
+        self.benefit_model = benefit.BenefitModel()
+        # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
+        self.forced_selection = None
 
     def close(self):
         if self.trace_scene is not None:
@@ -188,25 +199,34 @@ class FrameRenderer:
         element_bounds = self.element_bounds(snapshot)
         footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px) \
             if shadow_lights and layers is not None else np.zeros(n_elements)
+        learn_benefit = mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+        flags = {effect: np.array([getattr(e, effect) for e in snapshot.elements], bool)
+                 for effect in ("shadows", "reflections", "refractions")}
+        expected_benefit = self.benefit_model.benefit(
+            [e.name for e in snapshot.elements],
+            benefit.prior_per_pixel(layers, n_elements, flags["reflections"], flags["refractions"],
+                                    flags["shadows"], materials)) if learn_benefit else None
         frame_elements = heuristic.FrameElements(
             names=[e.name for e in snapshot.elements],
             candidate=np.array([e.candidate for e in snapshot.elements], bool),
             area_px=area_px, centre_ndc=centre_ndc, distance=distance,
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
-            shadows=np.array([e.shadows for e in snapshot.elements], bool),
-            reflections=np.array([e.reflections for e in snapshot.elements], bool),
-            refractions=np.array([e.refractions for e in snapshot.elements], bool),
+            shadows=flags["shadows"], reflections=flags["reflections"], refractions=flags["refractions"],
             rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint),
             frame_px=raster.width * raster.height,
             near_clip=snapshot.camera.clip_start,
+            benefit=expected_benefit,
         )
         selection = heuristic.select(
             frame_elements, self.previous_selection,
             heuristic.SelectionSettings(budget_ms=settings.budget_ms, selection_weight=settings.selection_weight,
                                         max_area_fraction=settings.max_area_fraction, mode=mode,
-                                        cost_mode=settings.cost_mode),
+                                        cost_mode=settings.cost_mode, relevance=settings.relevance,
+                                        order=settings.selection_order, budget_at=settings.budget_at),
             self.cost_model, frame=snapshot.frame)
+        if self.forced_selection is not None:
+            selection = heuristic.force_selection(selection, self.forced_selection)
         selected = np.asarray(selection.selected, bool)
         select_ms += _ms(start)
 
@@ -221,13 +241,23 @@ class FrameRenderer:
 
         # -- lighting and composite (GPU) -----------------------------------------
         start = _timer()
-        combined = raster.shade(traced)
+        measure = learn_benefit and traced is not None
+        combined = raster.shade(traced, measure_change=measure)
         composite_ms = _ms(start)
         # Uploading the traced results is part of the tracing's cost, which scales with the selection.
         traced_upload_ms = float(raster.stats.get("traced_upload_ms", 0.0)) if traced is not None else 0.0
         trace_ms += traced_upload_ms
         composite_ms = max(composite_ms - traced_upload_ms, 0.0)
         passes = self._passes(snapshot, raster, combined, selected, candidate)
+
+        if measure:
+            # The error-aware relevance learns what tracing changed, measured on the GPU beside the
+            # image (selection bookkeeping: select_ms).
+            start = _timer()
+            difference = benefit.measure_differences(snapshot, layers, raster.traced_change(), traced, selected,
+                                                     element_bounds)
+            self.benefit_model.observe(frame_elements.names, selected, difference, area_px)
+            select_ms += _ms(start)
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
         setup_ms = raster.setup_ms + counters.upload_ms
@@ -245,7 +275,7 @@ class FrameRenderer:
         stats = {
             "frame": snapshot.frame, "mode": mode, "total_ms": total_ms, "raster_ms": raster_ms,
             "select_ms": select_ms, "trace_ms": trace_ms, "composite_ms": composite_ms,
-            "budget_ms": settings.budget_ms, "predicted_trace_ms": float(selection.predicted_trace_ms),
+            "budget_ms": selection.budget_ms, "predicted_trace_ms": float(selection.predicted_trace_ms),
             "n_candidates": int(np.sum(frame_elements.candidate)),
             "n_visible": int(np.sum(np.asarray(selection.visible, bool))),
             "n_selected": int(np.sum(selected)), "rays": counters.rays,
@@ -279,6 +309,7 @@ class FrameRenderer:
             normal=np.nan_to_num(raster.front_normal).astype(np.float32),
             selected=selected_flags[front].astype(np.float32),
             candidate=candidate_flags[front].astype(np.float32),
+            element=(front + 1).astype(np.float32),
         )
 
     def _shadow_footprints(self, layers, snapshot, element_bounds, area_px):

@@ -80,6 +80,23 @@ Relevance edges
     The paper links every node to all nodes of higher relevance: O(n^2) edges.
     Their information is the relevance order, which is all selection needs;
     :meth:`SelectionGraph.relevance_edges` materialises them for debugging only.
+Relevance (the ``relevance`` setting)
+    ``paper`` (default) is equation (3).  ``error`` replaces V in it by V times
+    the element's expected benefit of tracing, per pixel (``FrameElements.benefit``:
+    a running estimate of how much its traced image differs from its raster
+    image, kept by :mod:`.benefit`), normalised like V so that the most
+    beneficial competing element has 1 and I keeps its meaning.  The logged V
+    stays the paper's; the rows carry the normalised product as ``benefit``.
+Greedy order (the ``order`` setting)
+    ``relevance`` (default) is the paper's: highest R first.  ``relevance_per_ms``
+    orders by R per predicted millisecond (the knapsack's greedy ratio); ties
+    and the pass itself are the same.
+Budget as a fraction (``budget_at``)
+    When set (0 = raster, 1 = ray traced frame time) and no T is given, T is that
+    fraction of the predicted ray tracing time of every visible candidate (what a
+    RAYTRACE frame traces): the budget follows the machine without a
+    millisecond figure.  Replays resolve it to milliseconds once, before the
+    first frame (``engine/budget.py``); this per-frame form serves single renders.
 Hysteresis margin
     Used by :func:`hysteresis_margin` and the property tests: for a competing
     element, how much its V can change (with everything else, its cost and the
@@ -95,6 +112,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from dataclasses import replace as dataclass_replace
 from functools import cached_property
 from itertools import compress
 from typing import Iterable, Mapping, Sequence
@@ -108,6 +126,10 @@ from .cost_model import MAX_PREDICTED_MS, CostModel, normalise_cost_mode
 SELECTION_COLUMNS = ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S", "R", "selected", "reason")
 REASONS = ("not_visible", "over_area", "over_budget", "not_candidate")
 MODES = ("RASTER", "HYBRID", "RAYTRACE")
+RELEVANCES = ("paper", "error")
+ORDERS = ("relevance", "relevance_per_ms")
+# The smallest predicted cost an R-per-ms order divides by (a 0 ms node comes first).
+MIN_ORDER_MS = 1e-6
 
 # Blender's default camera clip_start: the near-plane clamp of D when the engine
 # does not pass the camera's own.
@@ -147,8 +169,9 @@ class FrameElements:
     ``priority``      K (>= 0); ``rt_cost`` Q (>= 0)
     ``rays_per_pixel`` rays one pixel of the element costs with its effects
     ``near_clip``     the camera's clip_start, the near-plane clamp of D
+    ``benefit``       expected traced-vs-raster difference per pixel (``error`` relevance)
     Optional arrays default to: candidate True, centre 0, distance 1, K 1, Q 1,
-    no effects, 1 ray per pixel.  Sanitising: pixel counts are clipped to
+    no effects, 1 ray per pixel, benefit 1.  Sanitising: pixel counts are clipped to
     [0, frame_px]; a NaN K counts as 0, a NaN Q as 1, NaN rays as 0; K, Q and
     rays are clipped to [0, a large finite maximum]; a near_clip that is not a
     positive finite number falls back to NEAR_CLIP_DISTANCE.
@@ -167,6 +190,7 @@ class FrameElements:
     refractions: np.ndarray | None = None
     rays_per_pixel: np.ndarray | None = None
     near_clip: float = NEAR_CLIP_DISTANCE
+    benefit: np.ndarray | None = None
 
     def __post_init__(self):
         self.names = list(map(str, self.names))
@@ -199,6 +223,7 @@ class FrameElements:
         self.rt_cost = _finite(column("rt_cost", 1.0, np.float64), nan=1.0, low=0.0, high=MAX_RT_COST)
         self.rays_per_pixel = _finite(column("rays_per_pixel", 1.0, np.float64), nan=0.0, low=0.0,
                                       high=MAX_RAYS_PER_PIXEL)
+        self.benefit = _finite(column("benefit", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_VISIBILITY)
 
     def __len__(self) -> int:
         return len(self.names)
@@ -208,9 +233,10 @@ class FrameElements:
 class SelectionSettings:
     """The scene's settings of the heuristic (``Scene.phrt``), checked once.
 
-    ``mode`` and ``cost_mode`` accept any case ('HYBRID', 'paper', 'PAPER'...).
-    ``n_parallel`` is the paper's N (GPU stream processors there): the number of
-    nodes of phase 1; None means the CPU worker threads (``os.cpu_count()``).
+    ``mode``, ``cost_mode``, ``relevance`` and ``order`` accept any case ('HYBRID',
+    'paper', 'PAPER'...).  ``n_parallel`` is the paper's N (GPU stream processors
+    there): the number of nodes of phase 1; None means the CPU worker threads
+    (``os.cpu_count()``).  ``budget_at`` (None or 0..1): see "Budget as a fraction".
     """
 
     budget_ms: float = defaults.BUDGET_MS
@@ -219,12 +245,26 @@ class SelectionSettings:
     mode: str = "HYBRID"
     cost_mode: str = "measured"
     n_parallel: int | None = None
+    relevance: str = "paper"
+    order: str = "relevance"
+    budget_at: float | None = None
 
     def __post_init__(self):
         self.mode = str(self.mode).strip().upper()
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, not {self.mode!r}")
         self.cost_mode = normalise_cost_mode(self.cost_mode)
+        self.relevance = str(self.relevance).strip().lower()
+        if self.relevance not in RELEVANCES:
+            raise ValueError(f"relevance must be one of {RELEVANCES} (any case), not {self.relevance!r}")
+        self.order = str(self.order).strip().lower()
+        if self.order not in ORDERS:
+            raise ValueError(f"order must be one of {ORDERS} (any case), not {self.order!r}")
+        if self.budget_at is not None:
+            fraction = float(self.budget_at)
+            if not 0.0 <= fraction <= 1.0:
+                raise ValueError(f"budget_at must be within 0..1, not {self.budget_at!r}")
+            self.budget_at = fraction
         for name in ("budget_ms", "selection_weight", "max_area_fraction"):
             value = float(getattr(self, name))
             if np.isnan(value) or value < 0:
@@ -254,6 +294,7 @@ class ElementTerms:
     visible: np.ndarray
     candidate: np.ndarray              # tagged and K > 0
     within_area: np.ndarray            # A <= max_area_fraction
+    weighted_visibility: np.ndarray | None = None  # V x benefit, normalised (``error`` relevance)
 
 
 def previously_selected_mask(names: Sequence[str], previous_selection) -> np.ndarray:
@@ -280,9 +321,10 @@ def previously_selected_mask(names: Sequence[str], previous_selection) -> np.nda
 
 
 def element_terms(elements: FrameElements, previously_selected: np.ndarray, selection_weight: float,
-                  max_area_fraction: float) -> ElementTerms:
+                  max_area_fraction: float, relevance: str = "paper") -> ElementTerms:
     """Equations (1)-(3) of the paper on whole arrays, with the clamps of the
-    module docstring.  No term is NaN or infinite."""
+    module docstring; with ``relevance='error'`` V in (3) is weighted by the
+    elements' benefit.  No term is NaN or infinite."""
     frame_px = elements.frame_px
     area_px = elements.area_px
     visible = area_px > 0 if frame_px > 0 else np.zeros(len(elements), dtype=bool)
@@ -308,11 +350,21 @@ def element_terms(elements: FrameElements, previously_selected: np.ndarray, sele
 
     cost = visibility * elements.rt_cost
     selected_before = np.asarray(previously_selected, dtype=bool)
-    relevance = (selected_before * float(selection_weight) + visibility) * elements.priority
+    weighted = None
+    relevance_visibility = visibility
+    if str(relevance).lower() == "error":
+        raw_weighted = raw_visibility * elements.benefit
+        weighted_scale = float(raw_weighted[competing].max()) if np.any(competing) else 0.0
+        if not (np.isfinite(weighted_scale) and weighted_scale > 0):
+            weighted_scale = 1.0
+        weighted = _finite(raw_weighted / weighted_scale, nan=0.0, low=0.0, high=MAX_VISIBILITY)
+        relevance_visibility = weighted
+    relevance = (selected_before * float(selection_weight) + relevance_visibility) * elements.priority
     return ElementTerms(
         area_fraction=area_fraction, centre_closeness=centre_closeness, distance=distance,
         visibility=visibility, visibility_scale=scale, cost=cost, previously_selected=selected_before,
         relevance=relevance, visible=visible, candidate=candidate, within_area=within_area,
+        weighted_visibility=weighted,
     )
 
 
@@ -328,13 +380,20 @@ class SelectionGraph:
     O(n log n).
     """
 
-    def __init__(self, nodes: np.ndarray, cost_ms: np.ndarray, relevance: np.ndarray):
+    def __init__(self, nodes: np.ndarray, cost_ms: np.ndarray, relevance: np.ndarray, order: str = "relevance"):
         self.nodes = np.asarray(nodes, dtype=np.int64)
         self.cost_ms = np.asarray(cost_ms, dtype=np.float64)
         self.relevance = np.asarray(relevance, dtype=np.float64)
         if not (self.nodes.shape == self.cost_ms.shape == self.relevance.shape):
             raise ValueError("nodes, cost_ms and relevance must have the same length")
-        self.relevance_order = np.lexsort((self.nodes, self.cost_ms, -self.relevance))
+        if order == "relevance_per_ms":
+            key = self.relevance / np.maximum(self.cost_ms, MIN_ORDER_MS)
+        elif order == "relevance":
+            key = self.relevance
+        else:
+            raise ValueError(f"order must be one of {ORDERS}, not {order!r}")
+        # The greedy pass's order (the paper's: relevance; or relevance per predicted ms).
+        self.relevance_order = np.lexsort((self.nodes, self.cost_ms, -key))
 
     def __len__(self) -> int:
         return len(self.nodes)
@@ -403,7 +462,8 @@ class SelectionResult:
     paper's short names are available as properties (A, P, D, V, C, R, S, K, Q).
     ``predicted_ms`` is each element's predicted ray tracing ms (what it is
     charged against T), ``predicted_trace_ms`` the total of the selection,
-    ``time_left_ms`` the T the selection was fitted to.
+    ``time_left_ms`` the T the selection was fitted to, ``budget_ms`` the frame
+    budget it came from (resolved from ``budget_at`` when that was set).
     """
 
     elements: FrameElements
@@ -419,6 +479,9 @@ class SelectionResult:
     selection_weight: float
     frame: int | None = None
     trace_order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    budget_ms: float | None = None
+    relevance_mode: str = "paper"
+    order: str = "relevance"
 
     @property
     def names(self) -> list[str]:
@@ -449,17 +512,22 @@ class SelectionResult:
         n = len(self.names)
         as_int = lambda array: np.asarray(array, dtype=np.int64).tolist()  # noqa: E731
         as_float = lambda array: np.asarray(array, dtype=np.float64).tolist()  # noqa: E731
-        return {
+        columns = {
             "frame": [frame] * n, "element": list(self.names), "visible": as_int(self.visible),
             "A": as_float(self.A), "P": as_float(self.P), "D": as_float(self.D), "V": as_float(self.V),
             "Q": as_float(self.Q), "C": as_float(self.C), "K": as_float(self.K), "S": as_int(self.S),
             "R": as_float(self.R), "selected": as_int(self.selected), "reason": list(self.reason),
         }
+        if self.terms.weighted_visibility is not None:
+            columns["benefit"] = as_float(self.terms.weighted_visibility)
+        return columns
 
     def rows(self, frame: int | None = None) -> list[dict]:
-        """One dict per element with the keys of SELECTION_COLUMNS, in order."""
+        """One dict per element with the keys of SELECTION_COLUMNS, in order (plus ``benefit``,
+        the normalised V x benefit that replaced V in R, under the ``error`` relevance)."""
         columns = self.columns(frame)
-        return [dict(zip(SELECTION_COLUMNS, values)) for values in zip(*(columns[key] for key in SELECTION_COLUMNS))]
+        keys = SELECTION_COLUMNS + (("benefit",) if "benefit" in columns else ())
+        return [dict(zip(keys, values)) for values in zip(*(columns[key] for key in keys))]
 
 
 def select(elements: FrameElements, previous_selection=None, settings: SelectionSettings | None = None,
@@ -475,7 +543,8 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     settings = settings or SelectionSettings()
     model = model or CostModel()
     previously_selected = previously_selected_mask(elements.names, previous_selection)
-    terms = element_terms(elements, previously_selected, settings.selection_weight, settings.max_area_fraction)
+    terms = element_terms(elements, previously_selected, settings.selection_weight, settings.max_area_fraction,
+                          settings.relevance)
 
     if element_ms is None:
         predicted_ms = model.predict_element_ms(elements, terms.cost, settings.cost_mode)
@@ -484,8 +553,16 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         if predicted_ms.shape != (len(elements),):
             raise ValueError(f"element_ms has shape {predicted_ms.shape}, expected ({len(elements)},)")
         predicted_ms = _finite(predicted_ms, nan=0.0, low=0.0, high=MAX_PREDICTED_MS)
+    budget_ms = settings.budget_ms
     if settings.mode == "RASTER":
         time_left = 0.0
+    elif time_left_ms is None and settings.budget_at is not None:
+        # A fraction of the way to the ray traced frame: of the predicted time to trace every
+        # visible candidate (RAYTRACE's selection), with the same non-trace stages.
+        traced_by_raytrace = terms.candidate & terms.visible
+        time_left = settings.budget_at * float(np.sum(predicted_ms[traced_by_raytrace]))
+        time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
+        budget_ms = float(min(model.non_trace_ms() + time_left, MAX_PREDICTED_MS))
     else:
         time_left = model.time_left(settings.budget_ms) if time_left_ms is None else time_left_ms
         time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
@@ -499,7 +576,7 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     trace_order = np.zeros(0, dtype=np.int64)
     if settings.mode == "HYBRID":
         nodes = np.flatnonzero(eligible)
-        graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes])
+        graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes], settings.order)
         node_selected, node_phase, predicted_trace = graph.select(time_left, settings.n_parallel)
         selected[nodes] = node_selected
         phase[nodes] = node_phase
@@ -522,7 +599,31 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         predicted_ms=predicted_ms, predicted_trace_ms=float(min(predicted_trace, MAX_PREDICTED_MS)),
         time_left_ms=time_left, mode=settings.mode, cost_mode=settings.cost_mode,
         selection_weight=settings.selection_weight, frame=frame, trace_order=trace_order,
+        budget_ms=budget_ms, relevance_mode=settings.relevance, order=settings.order,
     )
+
+
+def force_selection(result: SelectionResult, names) -> SelectionResult:
+    """``result`` with its selection replaced by ``names`` (those visible and candidates):
+    the oracle's hook (:mod:`.oracle`), which renders chosen subsets of a frame outside
+    any timed region.  Terms, T and predictions stay; reasons follow the new selection
+    (an element dropped gets ``over_budget`` or its own reason)."""
+    chosen = {str(name) for name in names}
+    terms = result.terms
+    eligible = terms.candidate & terms.visible
+    selected = eligible & np.fromiter((name in chosen for name in result.names), dtype=bool,
+                                      count=len(result.names))
+    reason = np.full(len(result.names), "over_budget", dtype=object)
+    reason[~terms.within_area] = "over_area"
+    reason[~terms.visible] = "not_visible"
+    reason[~terms.candidate] = "not_candidate"
+    reason[selected] = ""
+    indices = np.flatnonzero(selected)
+    trace_order = indices[np.lexsort((indices, -terms.relevance[indices]))]
+    phase = np.where(selected, 1, 0).astype(np.int8)
+    return dataclass_replace(result, selected=selected, reason=reason.tolist(), phase=phase,
+                             trace_order=trace_order,
+                             predicted_trace_ms=float(min(np.sum(result.predicted_ms[selected]), MAX_PREDICTED_MS)))
 
 
 def hysteresis_margin(result: SelectionResult) -> np.ndarray:

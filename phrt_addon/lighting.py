@@ -35,6 +35,7 @@ class ReferenceRaster:
         self.front_element = gbuffer.front_element()
         self.view_depth = gbuffer.view_depth
         self.front_normal = gbuffer.front_normal()
+        self._change = None
 
     def gbuffer(self) -> GBuffer:
         return self._gbuffer
@@ -59,7 +60,19 @@ class ReferenceRaster:
             emission=materials.emission[material].astype(np.float32))
         return flat, material, surface
 
-    def shade(self, traced=None) -> np.ndarray:
+    def traced_change(self) -> np.ndarray:
+        return self._change
+
+    def shade(self, traced=None, measure_change=False) -> np.ndarray:
+        if measure_change:
+            with_traced = self._shade(traced)
+            without = self._shade(None)
+            difference = np.abs(with_traced[..., :3] - without[..., :3]) @ np.array([0.2126, 0.7152, 0.0722])
+            self._change = np.zeros_like(with_traced)
+            self._change[..., 0] = np.minimum(difference, 1.0)  # shadows and surface terms together
+        return self._shade(traced)
+
+    def _shade(self, traced=None) -> np.ndarray:
         snapshot = self.snapshot
         gbuffer = self._gbuffer
         materials = shading.MaterialTable(snapshot.materials)
@@ -111,14 +124,16 @@ class ReferenceRaster:
         flat, material, surface, color, transmissive, fresnel_t = shaded["transparent"]
         if len(flat):
             behind = image[flat].copy()  # raster: straight through, no bending
+            refracted = behind  # the transmitted part, bent where traced
             if traced is not None and traced.refraction is not None:
-                refracted = np.zeros((n, 4))
+                traced_image = np.zeros((n, 4))
                 pixels, radiance = traced.refraction
-                refracted[pixels, :3] = radiance
-                refracted[pixels, 3] = 1.0
-                mine = refracted[flat]
-                behind = np.where(mine[:, 3:] > 0.5, mine[:, :3], behind)
-            transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * surface.albedo * behind
+                traced_image[pixels, :3] = radiance
+                traced_image[pixels, 3] = 1.0
+                mine = traced_image[flat]
+                refracted = np.where(mine[:, 3:] > 0.5, mine[:, :3], behind)
+            # The 1 - alpha part goes straight on (as the tracer's alpha pass-through does).
+            transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * surface.albedo * refracted
             alpha = materials.alpha[material][:, None]
             image[flat] = alpha * (color + transmitted) + (1.0 - alpha) * behind
         combined = np.ones((self.height, self.width, 4), np.float32)

@@ -86,6 +86,18 @@ def flip(reference, test):
     return max(float(mean_error), 0.0)
 
 
+def flip_map(reference, test):
+    """Per-pixel LDR-FLIP (H, W) between two linear HDR images (tone-mapped by :func:`tonemap`)."""
+    import flip_evaluator
+
+    reference, test = _pair(reference, test)
+    error_map, _, _ = flip_evaluator.evaluate(
+        np.ascontiguousarray(tonemap(reference)), np.ascontiguousarray(tonemap(test)),
+        "LDR", inputsRGB=True, applyMagma=False, computeMeanError=False)
+    error_map = np.asarray(error_map, dtype=np.float32)
+    return np.clip(np.nan_to_num(error_map.reshape(reference.shape[:2]), nan=0.0), 0.0, 1.0)
+
+
 def relmse(reference, test, epsilon=RELMSE_EPSILON):
     """Relative MSE of linear HDR images: mean((test - ref)^2 / (ref^2 + epsilon))."""
     reference, test = _pair(reference, test)
@@ -162,6 +174,42 @@ def _read_exr(path):
         raise ValueError(f"{path}: no RGB channels (has {sorted(channels)})")
     image = np.stack([np.asarray(plane, dtype=np.float32) for plane in planes], axis=-1)
     return np.nan_to_num(image, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX)
+
+
+def read_pass(path, pass_name):
+    """One pass of a Blender multilayer EXR as float32 (H, W, channels), top row first,
+    e.g. ``read_pass(path, "PHRT Element")``; ``ValueError`` if the file has no such pass."""
+    return read_passes(path, (pass_name,))[pass_name]
+
+
+_CHANNEL_ORDER = {"R": 0, "G": 1, "B": 2, "A": 3, "X": 0, "Y": 1, "Z": 2}
+
+
+def read_passes(path, pass_names):
+    """Several passes of one multilayer EXR, read once: {name: float32 (H, W, channels)} with
+    channels in R, G, B, A (X, Y, Z) order; ``ValueError`` if a pass is missing."""
+    import OpenEXR
+
+    path = Path(path)
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as exr:
+            channels = {}
+            for part in exr.parts:
+                for name, channel in part.channels.items():
+                    channels.setdefault(name, channel.pixels)
+    except (OSError, RuntimeError) as error:
+        raise ValueError(f"{path}: cannot read the image ({error})") from error
+    passes = {}
+    for pass_name in pass_names:
+        names = sorted(name for name in channels if name.rsplit(".", 1)[0].split(".")[-1] == pass_name)
+        if not names:
+            raise ValueError(f"{path}: no pass '{pass_name}'")
+        layer = names[0].rsplit(".", 1)[0]
+        names = sorted((name for name in names if name.rsplit(".", 1)[0] == layer),
+                       key=lambda name: _CHANNEL_ORDER.get(name.rsplit(".", 1)[1], 9))
+        image = np.stack([np.asarray(channels[name], dtype=np.float32) for name in names], axis=-1)
+        passes[pass_name] = np.nan_to_num(image, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX)
+    return passes
 
 
 def _read_png(path):

@@ -178,6 +178,9 @@ class Settings:
     max_bounces: int = 4
     cost_mode: str = "MEASURED"
     shadow_map_size: int = 2048
+    budget_at: float | None = None  # set: the budget is this fraction of the way from raster to ray traced
+    relevance: str = "PAPER"  # 'PAPER' (equation 3) or 'ERROR' (V x expected benefit, see heuristic.py)
+    selection_order: str = "RELEVANCE"  # 'RELEVANCE' (the paper's) or 'RELEVANCE_PER_MS'
 
 
 @dataclass

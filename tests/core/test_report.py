@@ -95,11 +95,13 @@ def test_report_writes_every_file(three_modes):
     assert '<img src="error_vs_time.png"' in html and '<img src="timeline.png"' in html
 
 
-def test_table_ii_has_mean_ms_per_mode_per_path(three_modes):
+def test_table_ii_has_mean_ms_per_mode_per_path_and_the_papers_ratios(three_modes):
     _, _, files = three_modes
     markdown = files.markdown.read_text()
-    # total_ms = base + frame, frames 1-4: mean = base + 2.5.
-    assert "| atrium | path1 | 22.5 | 102.5 / 92.5 | 402.5 |" in markdown
+    # total_ms = base + frame, frames 1-4: mean = base + 2.5.  Ratios: ours 102.5 / 22.5 and
+    # 402.5 / 102.5; the paper's atrium path 1: 165.4 / 26.7 and 340.4 / 165.4.
+    assert ("| atrium | path1 | 22.5 | 102.5 | 402.5 | 4.56 | 6.19 | 3.93 | 2.06 | atrium-path1-hybrid |"
+            in markdown)
 
 
 def test_errors_are_per_frame_against_the_raytrace_run(three_modes):

@@ -126,7 +126,7 @@ def take_snapshot(name: str) -> Snapshot:
         "frame_range": (scene.frame_start, scene.frame_end), "fps": scene.render.fps / scene.render.fps_base,
         "resolution": (scene.render.resolution_x, scene.render.resolution_y,
                        scene.render.resolution_percentage),
-        "budget_ms": scene.phrt.budget_ms, "camera": scene.camera.name, "engine": scene.render.engine,
+        "budget_at": scene.phrt.budget_at if scene.phrt.use_budget_at else None, "camera": scene.camera.name, "engine": scene.render.engine,
         "phrt_paths": scene.get("phrt_paths"), "over_area": scene.get("phrt_over_area"),
         "over_area_element": scene.get("phrt_over_area_element"),
         "path_names": generate.path_names(scene),
@@ -199,7 +199,8 @@ def test_scene_defaults(snap):
     assert settings["frame_range"] == (1, 1000)
     assert settings["fps"] == 60
     assert settings["resolution"] == (640, 480, 100)
-    assert settings["budget_ms"] == pytest.approx(generate.BUDGET_MS) and 0 < settings["budget_ms"] < 5000
+    # A budget between the modes, resolved on the machine that renders: no millisecond figure.
+    assert settings["budget_at"] == pytest.approx(generate.BUDGET_AT) and 0 < settings["budget_at"] < 1
     assert settings["camera"] == "path1"
     assert settings["engine"] in ("PHRT", "CYCLES")
     assert settings["phrt_paths"] == "path1,path2,path3"

@@ -1,0 +1,152 @@
+"""A sweep as a plan of jobs (phrt_addon/plan.py) and budgets between the modes
+(phrt_addon/budget.py).  No bpy: the jobs here are plain functions."""
+import json
+
+import pytest
+
+from phrt.phrt_addon import budget, plan
+from phrt.phrt_addon.runlog import RunLog
+
+
+def test_budgets_are_spread_evenly_strictly_between_raster_and_raytrace():
+    assert plan.budget_fractions(3) == [0.25, 0.5, 0.75]
+    assert plan.budget_fractions(1) == [0.5]
+    with pytest.raises(ValueError):
+        plan.budget_fractions(0)
+
+
+def sweep_plan(budgets=(0.25, 0.75)):
+    return plan.build_plan("arcade", "arcade", "path1", (1, 24), (320, 240), budgets)
+
+
+def test_plan_has_raster_and_raytrace_then_every_budget_in_every_variant_then_the_oracle():
+    built = sweep_plan()
+    ids = [job.id for job in built.jobs]
+    assert ids[:2] == ["arcade-path1-raster", "arcade-path1-raytrace"]
+    assert len(ids) == len(set(ids)) == 2 + 2 * len(plan.VARIANTS) + 1
+    hybrids = [job for job in built.jobs if job.mode == "HYBRID"]
+    assert {job.budget_at for job in hybrids} == {0.25, 0.75}
+    assert {job.overrides["cost_mode"] for job in hybrids} == {"MEASURED", "PAPER"}  # both cost modes
+    assert {job.overrides["selection_weight"] for job in hybrids} == {0.0, 0.1, 0.5}
+    assert {job.overrides["relevance"] for job in hybrids} == {"PAPER", "ERROR"}
+    assert {job.overrides["selection_order"] for job in hybrids} == {"RELEVANCE", "RELEVANCE_PER_MS"}
+    assert all(job.depends_on == ids[:2] for job in hybrids)
+    oracle_job = built.jobs[-1]
+    assert oracle_job.kind == "oracle" and set(oracle_job.depends_on) == {ids[1], *(job.id for job in hybrids)}
+
+
+def test_plan_json_round_trips(tmp_path):
+    built = sweep_plan()
+    path = plan.write_plan(built, tmp_path / "sweep")
+    assert path.name == "plan.json"
+    data = json.loads(path.read_text())
+    assert [job["id"] for job in data["jobs"]] == [job.id for job in built.jobs]
+    again = plan.read_plan(path)
+    assert again.to_json() == built.to_json()
+    assert plan.same_work(built, again)
+    with pytest.raises(ValueError, match="outside"):
+        plan.build_plan("arcade", "arcade", "path1", (1, 2), (64, 48), [1.5])
+
+
+def finished_run(folder, frames=24, resolution=(320, 240), mode="RASTER", base_ms=100.0, **extra):
+    log = RunLog(folder)
+    for frame in range(1, frames + 1):
+        log.add_frame({"frame": frame, "mode": mode, "total_ms": base_ms + frame, "raster_ms": 90.0,
+                       "select_ms": 1.0, "trace_ms": 0.0, "composite_ms": 9.0, "budget_ms": 150.0,
+                       "predicted_trace_ms": 0.0, "n_candidates": 0, "n_visible": 0, "n_selected": 0, "rays": 0,
+                       "setup_ms": 40.0 if frame == 1 else 0.0})
+    return log.close({"scene": "arcade", "path": "path1", "resolution": list(resolution),
+                      "blender_version": "5.0.1", "embreex_version": "4.4.0.post1", **extra})
+
+
+def test_a_run_is_complete_only_with_a_whole_uncancelled_summary(tmp_path):
+    built = sweep_plan()
+    assert not plan.run_is_complete(tmp_path / "none", built)
+    finished_run(tmp_path / "whole")
+    assert plan.run_is_complete(tmp_path / "whole", built)
+    finished_run(tmp_path / "short", frames=3)
+    finished_run(tmp_path / "cancelled", cancelled=True)
+    finished_run(tmp_path / "small", resolution=(160, 120))
+    for name in ("short", "cancelled", "small"):
+        assert not plan.run_is_complete(tmp_path / name, built), name
+
+
+def test_publish_replaces_an_incomplete_folder(tmp_path):
+    final = tmp_path / "run"
+    final.mkdir()
+    (final / "stale.txt").write_text("old")
+    partial = tmp_path / ".run.partial-1"
+    partial.mkdir()
+    (partial / "summary.json").write_text("{}")
+    plan.publish(partial, final)
+    assert (final / "summary.json").exists() and not (final / "stale.txt").exists() and not partial.exists()
+
+
+def test_local_executor_runs_in_order_and_skips_what_depends_on_a_failure(tmp_path):
+    built = plan.build_plan("arcade", "arcade", "path1", (1, 2), (64, 48), [0.5], variants=("measured", "error"))
+    path = plan.write_plan(built, tmp_path)
+    calls = []
+
+    def execute(plan_path, job_id):
+        calls.append(job_id)
+        assert plan_path == str(path)
+        if job_id.endswith("raytrace"):
+            raise RuntimeError("no Embree")
+        return plan.JobOutcome(job_id, "done")
+
+    seen = []
+    outcomes = plan.LocalExecutor().run(path, built, execute, on_outcome=seen.append)
+    assert calls == ["arcade-path1-raster", "arcade-path1-raytrace"]
+    status = {outcome.job_id: outcome.status for outcome in outcomes}
+    assert status["arcade-path1-raster"] == "done"
+    assert set(status.values()) == {"done", "failed"} and len(outcomes) == len(built.jobs) == len(seen)
+    raytrace = next(o for o in outcomes if o.job_id.endswith("raytrace"))
+    assert "RuntimeError: no Embree" in raytrace.message
+    assert next(o for o in outcomes if o.job_id == "oracle").message.startswith("not run: arcade-path1-raytrace")
+
+
+# -- budgets between the modes ------------------------------------------------------------------
+
+def test_budget_is_the_fraction_of_the_way_from_raster_to_raytrace():
+    assert budget.budget_between(0.0, 200.0, 600.0) == 200.0
+    assert budget.budget_between(0.25, 200.0, 600.0) == 300.0
+    assert budget.budget_between(1.0, 200.0, 600.0) == 600.0
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError):
+            budget.budget_between(bad, 200.0, 600.0)
+
+
+def test_steady_mean_leaves_out_one_time_setup():
+    rows = [{"total_ms": 500.0, "setup_ms": 400.0}, {"total_ms": 110.0, "setup_ms": 10.0},
+            {"total_ms": 100.0}, {"total_ms": None}]
+    assert budget.steady_mean_ms(rows) == pytest.approx(100.0)
+    assert budget.steady_mean_ms([]) is None
+
+
+def test_reference_runs_are_found_by_scene_path_resolution_and_machine(tmp_path):
+    summary = finished_run(tmp_path / "raster")
+    raytrace = finished_run(tmp_path / "raytrace", mode="RAYTRACE", base_ms=300.0)
+    finished_run(tmp_path / "raytrace-cancelled", mode="RAYTRACE", base_ms=900.0, frames=30, cancelled=True)
+    cpu = summary["machine"]["cpu_model"]
+    assert raytrace["machine"]["cpu_model"] == cpu
+    found = budget.find_reference_runs([tmp_path], "arcade", "path1", (320, 240), cpu)
+    assert found == (tmp_path / "raster", tmp_path / "raytrace")
+    assert budget.find_reference_runs([tmp_path], "arcade", "path2", (320, 240), cpu) is None
+    assert budget.find_reference_runs([tmp_path], "arcade", "path1", (640, 480), cpu) is None
+    assert budget.find_reference_runs([tmp_path], "arcade", "path1", (320, 240), "another CPU") is None
+    # Run folders may be given themselves.
+    assert budget.find_reference_runs([tmp_path / "raster", tmp_path / "raytrace"], "arcade", "path1",
+                                      (320, 240)) == found
+    resolved = budget.from_runs(0.5, *found)
+    # Steady means: frame 1's 40 ms of set-up left out.  Raster 112.5 - 40/24, raytrace 312.5 - 40/24.
+    assert resolved.method == "runs"
+    assert resolved.raster_ms == pytest.approx(112.5 - 40 / 24) and resolved.raytrace_ms == pytest.approx(312.5 - 40 / 24)
+    assert resolved.budget_ms == pytest.approx((resolved.raster_ms + resolved.raytrace_ms) / 2)
+    source = resolved.as_summary()
+    assert source["budget_at"] == 0.5 and source["raster_run"].endswith("raster")
+
+
+def test_calibration_frames_spread_over_the_range():
+    assert budget.calibration_frames((1, 1000), 3) == [1, 500, 1000]
+    assert budget.calibration_frames((5, 6), 3) == [5, 6]
+    assert budget.calibration_frames((7, 7), 3) == [7]
