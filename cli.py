@@ -6,6 +6,7 @@
     phrt report RUN_DIR... [--reference RUN_DIR] [--out DIR]
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
+                     [--workers N | --scheduler ADDRESS]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -74,6 +75,13 @@ def build_parser():
     sweep.add_argument("--variants", metavar="NAME[,NAME...]",
                        help="selection variants of the hybrid runs (default all: measured, papercost, i0, i0.1, "
                             "rperms, error)")
+    sweep.add_argument("--workers", type=_count, default=None, metavar="N",
+                       help="run the plan on a Dask LocalCluster of N worker processes on this machine "
+                            "(default: one run after the other in this process)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the plan on the existing Dask cluster whose scheduler is at ADDRESS "
+                            "(tcp://HOST:8786); its workers need --resources phrt=1 and the sweep folder "
+                            "(docs/cluster.md)")
     return parser
 
 
@@ -331,10 +339,9 @@ def _budget_fractions(args):
 
 def command_sweep(args):
     from .engine import replay as replay_module
-    from .engine import sweep as sweep_engine
     from .phrt_addon import oracle as oracle_module
     from .phrt_addon import plan as plan_module
-    from .phrt_addon import report
+    _check_executor_options(args.workers, args.scheduler)
     fractions = _budget_fractions(args)
     variants = tuple(plan_module.VARIANTS)
     if args.variants is not None:
@@ -366,33 +373,85 @@ def command_sweep(args):
     scene_ref = args.scene if Path(args.scene).suffix.lower() != ".blend" else str(Path(args.scene).resolve())
     plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
                                   oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
+    executor = _start_executor(args.workers, args.scheduler)
+    try:
+        return _run_sweep(plan, folder, label, camera.name, frame_range, resolution, executor)
+    finally:
+        _close_executor(executor)
+
+
+def _check_executor_options(workers, scheduler):
+    """UserError for --workers with --scheduler or a malformed scheduler address (loads nothing)."""
+    from .phrt_addon import executors
+    try:
+        executors.make_executor(workers, scheduler)
+    except executors.ExecutorError as error:
+        raise UserError(str(error)) from None
+
+
+def _start_executor(workers, scheduler):
+    """The executor of --workers / --scheduler, started (UserError when the cluster cannot run the
+    plan), its dashboard printed."""
+    from .engine import sweep as sweep_engine
+    from .phrt_addon import executors
+    try:
+        executor = sweep_engine.make_executor(workers, scheduler)
+        if isinstance(executor, executors.DaskExecutor):
+            executor.start()
+    except executors.ExecutorError as error:
+        raise UserError(str(error)) from None
+    if isinstance(executor, executors.DaskExecutor):
+        where = (f"a Dask LocalCluster of {workers} worker processes" if workers is not None
+                 else f"the Dask cluster at {executor.address}")
+        print(f"phrt: running on {where}; dashboard {executor.dashboard_link or 'not available'}", flush=True)
+    return executor
+
+
+def _close_executor(executor):
+    close = getattr(executor, "close", None)
+    if close is None:
+        return
+    close()
+    for pid, what in executor.worker_exits:
+        print(f"phrt: warning: Dask worker process {pid} {what}", file=sys.stderr)
+
+
+def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, executor):
+    from .engine import sweep as sweep_engine
+    from .phrt_addon import executors
+    from .phrt_addon import plan as plan_module
     plan_path = plan_module.write_plan(plan, folder)
     started = time.perf_counter()
     total = len(plan.jobs)
-    print(f"phrt: sweep of {label}/{camera.name} frames {frame_range[0]}-{frame_range[1]} at "
+    print(f"phrt: sweep of {label}/{camera_name} frames {frame_range[0]}-{frame_range[1]} at "
           f"{resolution[0]}x{resolution[1]}: {len(plan.runs)} runs and the oracle -> {plan_path}", flush=True)
+    progress = executors.Progress(total, sys.stderr)
+    counter = [0]
 
-    def show(outcome, counter=[0]):
+    def show(outcome):
         counter[0] += 1
         line = f"phrt: [{counter[0]}/{total}] {outcome.job_id}: {outcome.status}"
         if outcome.status == "done":
-            line += f" in {outcome.seconds:.1f} s ({outcome.message})"
+            line += f" in {outcome.seconds:.1f} s"
+            line += f" on {outcome.worker}" if outcome.worker else ""
+            line += f" ({outcome.message})"
         elif outcome.message and outcome.status == "failed":
             line += f": {outcome.message}"
+        progress.clear()
         print(line, file=sys.stderr if outcome.status == "failed" else sys.stdout, flush=True)
+        progress.update(outcome)
 
-    outcomes = plan_module.LocalExecutor().run(plan_path, plan, sweep_engine.execute_job, on_outcome=show)
-    complete = [folder / job.id for job in plan.runs if plan_module.run_is_complete(folder / job.id, plan)]
+    try:
+        outcomes, files, no_report = sweep_engine.run_plan(plan_path, plan, executor, on_outcome=show)
+    except executors.ExecutorError as error:
+        raise UserError(str(error)) from None
     failed = [outcome for outcome in outcomes if outcome.status == "failed"]
-    if complete:
-        try:
-            files = report.build_report(complete, out_dir=folder / plan_module.REPORT_DIR,
-                                        oracle_dir=folder / oracle_module.ORACLE_DIR)
-        except ValueError as error:
-            print(f"phrt: no report: {str(error).splitlines()[0]}", file=sys.stderr)
-        else:
-            print(f"phrt: sweep report {files.markdown} ({files.sweep_csv.name}, {files.error_vs_time_png.name}); "
-                  f"{len(complete)} runs in {time.perf_counter() - started:.0f} s")
+    if files is not None:
+        complete = sum(plan_module.run_is_complete(folder / job.id, plan) for job in plan.runs)
+        print(f"phrt: sweep report {files.markdown} ({files.sweep_csv.name}, {files.error_vs_time_png.name}); "
+              f"{complete} runs in {time.perf_counter() - started:.0f} s")
+    else:
+        print(f"phrt: no report: {no_report}", file=sys.stderr)
     if failed:
         print(f"phrt: {len(failed)} of {total} jobs failed: {', '.join(o.job_id for o in failed)}", file=sys.stderr)
         return 1

@@ -20,13 +20,15 @@ Executors (:class:`Executor`) take the plan and a job function
 ``execute(plan_path, job_id) -> JobOutcome`` (``engine/sweep.py:execute_job``:
 module level, picklable, one Blender per process) and run every job after the
 jobs it ``depends_on``.  :class:`LocalExecutor` runs them one after the other
-in this process.  A distributed executor (e.g. Dask: one ``client.submit(execute,
-plan_path, job.id)`` per job, with the futures of ``depends_on`` as
-dependencies, on workers of one thread each, since ``bpy`` is one per process)
-only has to implement ``run``; the jobs read everything they need from
-``plan.json`` and the directories of the jobs they depend on.  Budgets in
-milliseconds are resolved from the raster and raytrace runs on the machine that
-runs the hybrid job: all jobs of a plan should run on machines of one kind.
+in this process; ``phrt_addon/executors.py`` has the Dask one (one task per
+job on worker processes of their own, docs/cluster.md).  The jobs read
+everything they need from ``plan.json`` and the directories of the jobs they
+depend on.  Budgets in milliseconds are resolved from the raster and raytrace
+runs on the machine that runs the hybrid job: all jobs of a plan should run on
+machines of one kind.
+
+A job may name its own scene and camera path (``make paper`` puts the runs of
+several paths of both scenes in one plan); by default it replays the plan's.
 
 Plain Python, no ``bpy``.
 """
@@ -79,6 +81,9 @@ class Job:
     variant: str | None = None
     overrides: dict = field(default_factory=dict)
     depends_on: list = field(default_factory=list)
+    scene: str | None = None  # None: the plan's scene (and scene_label), path and frames
+    scene_label: str | None = None
+    path: str | None = None
 
 
 @dataclass
@@ -100,6 +105,34 @@ class Plan:
             if job.id == job_id:
                 return job
         raise KeyError(f"no job '{job_id}' in the plan")
+
+    def target(self, job: Job) -> tuple:
+        """(scene, scene label, camera path) that ``job`` replays: its own, else the plan's."""
+        if job.scene is None:
+            return self.scene, self.scene_label, job.path or self.path
+        label = job.scene_label or (Path(job.scene).stem if job.scene.lower().endswith(".blend") else job.scene)
+        return job.scene, label, job.path or self.path
+
+    def in_dependency_order(self) -> list:
+        """The jobs, each after the jobs it depends on (plan order where it allows);
+        ValueError for a dependency on an unknown job or a cycle."""
+        ids = {job.id for job in self.jobs}
+        if len(ids) != len(self.jobs):
+            raise ValueError("the plan has two jobs of one id")
+        for job in self.jobs:
+            unknown = [dependency for dependency in job.depends_on if dependency not in ids]
+            if unknown:
+                raise ValueError(f"job '{job.id}' depends on unknown job(s) {', '.join(unknown)}")
+        ordered, placed, pending = [], set(), list(self.jobs)
+        while pending:
+            ready = [job for job in pending if all(dependency in placed for dependency in job.depends_on)]
+            if not ready:
+                raise ValueError(f"jobs {', '.join(job.id for job in pending)} depend on each other")
+            for job in ready:
+                ordered.append(job)
+                placed.add(job.id)
+            pending = [job for job in pending if job.id not in placed]
+        return ordered
 
     @property
     def runs(self) -> list:
@@ -214,7 +247,8 @@ class JobOutcome:
     job_id: str
     status: str  # 'done', 'skipped' or 'failed'
     seconds: float = 0.0
-    message: str = ""
+    message: str = ""  # one line
+    worker: str = ""  # 'host:pid' of the process that ran it, when not this one
 
 
 class Executor(Protocol):
@@ -230,7 +264,7 @@ class LocalExecutor:
 
     def run(self, plan_path, plan, execute, on_outcome=None):
         outcomes, failed = [], set()
-        for job in plan.jobs:
+        for job in plan.in_dependency_order():
             missing = [dependency for dependency in job.depends_on if dependency in failed]
             if missing:
                 outcome = JobOutcome(job.id, "failed", message=f"not run: {', '.join(missing)} failed")

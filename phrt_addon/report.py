@@ -290,14 +290,15 @@ def _measure_group(members, reference):
     return results
 
 
-def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None):
+def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None, failures=()):
     """Write the report of ``run_dirs`` into ``out_dir``; returns :class:`ReportFiles`.
 
     ``reference`` is a RUN_DIR (added to the runs if it is not among them);
     by default each path's raytrace run.  ``oracle_dir`` is an oracle folder
     (``phrt_addon/oracle.py``); by default the ``oracle`` folder beside the runs,
-    when they share one parent folder.  Raises ``ValueError`` with a message
-    for the user when a RUN_DIR is unusable or there is no reference at all.
+    when they share one parent folder.  ``failures`` are (job, one-line message)
+    pairs of a plan's jobs that failed, listed first.  Raises ``ValueError`` with
+    a message for the user when a RUN_DIR is unusable or there is no reference at all.
     """
     paths = []
     for run_dir in list(run_dirs) + ([reference] if reference is not None else []):
@@ -348,6 +349,11 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
                          oracle_results.candidate_rows)
     sections = _sections(runs, groups, references, errors, files, rows=rows, regrets=regrets, pops=pops,
                          oracle_results=oracle_results)
+    if failures:
+        sections[2:2] = [("table", _Table(
+            "Failed jobs", ["Job", "Why"], [[job, message] for job, message in failures],
+            "Jobs of the plan that ended without a result (after their retries); the report covers the "
+            "others. Running the plan again retries them."))]
     files.markdown.write_text(_markdown(sections), encoding="utf-8")
     files.html.write_text(_html(sections), encoding="utf-8")
     return files

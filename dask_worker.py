@@ -1,0 +1,46 @@
+"""What a Dask worker process does before its first PHRT job (docs/cluster.md).
+
+``BlenderWorker`` is a Dask worker plugin, registered by ``phrt sweep
+--workers/--scheduler`` on every worker of the cluster (and on workers that
+join or restart later).  Its ``setup`` runs on the worker's event loop, in the
+process's main thread: it imports ``bpy`` there, which makes that thread
+Blender's main thread (where jobs open their .blend files, see
+``phrt_addon/executors.on_main_thread``), and registers the PHRT add-on, which
+also unregisters it when the process ends so that the worker exits cleanly.
+
+A LocalCluster's worker processes are spawned with the ``sys.path`` of the
+process that starts them; when that one has imported ``bpy``, it holds
+Blender's script folders, and ``scripts/modules`` has a package named ``bpy``
+that would shadow the module: they are dropped before ``bpy`` is imported
+(importing it adds them again).  The worker's standard output goes to its
+standard error: Blender prints progress there, and a LocalCluster's workers
+share the ``phrt`` command's standard output, which is kept for its own lines.
+
+Not under ``engine/`` (whose ``__init__`` imports ``bpy``): the plugin is
+unpickled on the worker before ``bpy`` may be imported.  Imports Dask: only
+loaded when a Dask executor is used.
+"""
+from __future__ import annotations
+
+import os
+import re
+import sys
+
+from distributed import WorkerPlugin
+
+_BLENDER_SCRIPTS = re.compile(r"[\\/]scripts[\\/](startup|modules|freestyle[\\/]modules|addons[\\/]modules|addons_core)"
+                              r"[\\/]?$")
+
+
+class BlenderWorker(WorkerPlugin):
+    name = "phrt-blender"
+    idempotent = True  # set up once per worker process, however many clients register it
+
+    def setup(self, worker):
+        if "bpy" not in sys.modules:
+            sys.path[:] = [entry for entry in sys.path if not _BLENDER_SCRIPTS.search(entry)]
+        sys.stdout.flush()
+        os.dup2(2, 1)
+        from . import cli
+        cli._import_blender()
+        cli._blender()
