@@ -134,20 +134,41 @@ def describe_error(error: BaseException) -> str:
 
 
 class _WorkerExits(logging.Filter):
-    """Keeps the nanny's lines about worker processes that did not exit cleanly (it logs them at INFO,
-    which LocalCluster silences) and lets through only warnings and errors."""
+    """Hands the nanny's lines about worker processes that did not exit cleanly (logged at INFO,
+    which LocalCluster silences) to every listening executor, and lets through only warnings and
+    errors.  One per process, on the ``distributed.nanny`` logger (a logger stops at its first
+    filter that drops a record, so a filter per executor would hide lines from the others)."""
 
     PATTERN = re.compile(r"Worker process (\d+) (was killed by .*|exited with status \d+)")
 
     def __init__(self):
         super().__init__()
-        self.exits = []  # (pid, what happened)
+        self.listeners = []  # lists of (pid, what happened)
 
     def filter(self, record):
         match = self.PATTERN.search(record.getMessage())
         if match:
-            self.exits.append((int(match.group(1)), match.group(2)))
+            for listener in self.listeners:
+                listener.append((int(match.group(1)), match.group(2)))
         return record.levelno >= logging.WARNING
+
+
+_worker_exits = None
+
+
+def _listen_to_worker_exits(listener: list):
+    global _worker_exits
+    logger = logging.getLogger("distributed.nanny")
+    if _worker_exits is None:
+        _worker_exits = _WorkerExits()
+        logger.addFilter(_worker_exits)
+    _worker_exits.listeners.append(listener)
+    logger.setLevel(logging.INFO)
+
+
+def _stop_listening(listener: list):
+    if _worker_exits is not None and any(item is listener for item in _worker_exits.listeners):
+        _worker_exits.listeners = [item for item in _worker_exits.listeners if item is not listener]
 
 
 class DaskExecutor:
@@ -168,8 +189,7 @@ class DaskExecutor:
         self.connect_timeout_s = connect_timeout_s
         self.cluster = None
         self.client = None
-        self._exits = None
-        self._nanny_logger = None
+        self._exits = []  # (pid, what happened) of this LocalCluster's workers that did not exit cleanly
 
     # -- the cluster -------------------------------------------------------------------------
 
@@ -177,7 +197,7 @@ class DaskExecutor:
         distributed = _import_distributed()
         try:
             if self.workers is not None:
-                self._watch_worker_exits()
+                _listen_to_worker_exits(self._exits)
                 with warnings.catch_warnings():  # "port 8787 is in use": the link printed says where it is
                     warnings.simplefilter("ignore")
                     self.cluster = distributed.LocalCluster(
@@ -224,30 +244,19 @@ class DaskExecutor:
 
     @property
     def worker_exits(self) -> list:
-        """(pid, what happened) of each LocalCluster worker process that did not exit with status 0."""
-        return list(self._exits.exits) if self._exits is not None else []
-
-    def _watch_worker_exits(self):
-        self._exits = _WorkerExits()
-        self._nanny_logger = logging.getLogger("distributed.nanny")
-        self._nanny_logger.addFilter(self._exits)
-
-    def _nanny_logs_info(self):
-        """LocalCluster sets Dask's loggers to WARNING; the nanny's exit lines are INFO."""
-        if self._nanny_logger is not None:
-            self._nanny_logger.setLevel(logging.INFO)
+        """(pid, what happened) of each LocalCluster worker process that did not exit with status 0
+        (of every LocalCluster of this process while this one runs)."""
+        return list(self._exits)
 
     def close(self):
         if self.client is not None:
             self.client.close()
             self.client = None
         if self.cluster is not None:
-            self._nanny_logs_info()
+            logging.getLogger("distributed.nanny").setLevel(logging.INFO)  # LocalCluster set it to WARNING
             self.cluster.close()
             self.cluster = None
-        if self._nanny_logger is not None:
-            self._nanny_logger.removeFilter(self._exits)
-            self._nanny_logger = None
+        _stop_listening(self._exits)
 
     def __enter__(self):
         return self.start() if self.client is None else self
@@ -273,7 +282,8 @@ class DaskExecutor:
         from distributed import as_completed
         if self.client is None:
             raise RuntimeError("DaskExecutor.run before start()")
-        self._nanny_logs_info()
+        if self.cluster is not None:
+            logging.getLogger("distributed.nanny").setLevel(logging.INFO)  # LocalCluster set it to WARNING
         plan_path = str(Path(plan_path).resolve())
         ordered = plan.in_dependency_order()
         self.check_workers_see(plan_path)
