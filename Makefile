@@ -35,8 +35,10 @@ bench: $(STAMP)
 # 640x480, a 5-budget sweep of path1 of each, one report in out/paper/report/.  LONG: many hours
 # on 2 cores (about a second per frame); not part of `make test`.  Interrupted, it resumes:
 # complete runs are skipped.  `python -m phrt.paper --help` for a shorter one.
+# `make paper WORKERS=N` runs it on a Dask LocalCluster of N worker processes, `make paper
+# SCHEDULER=tcp://HOST:8786` on an existing Dask cluster (docs/cluster.md).
 paper: $(STAMP)
-	$(PY) -m phrt.paper --out out/paper
+	$(PY) -m phrt.paper --out out/paper $(if $(WORKERS),--workers $(WORKERS)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes

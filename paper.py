@@ -11,12 +11,18 @@ variant, and the oracle), then writes one report of everything to
 ``out/paper/report/``: Table II beside the paper's ratios, the error-time
 curves, regret and popping.
 
-Every run is a job that is skipped when complete, so an interrupted ``make
-paper`` continues where it stopped.  On 2 CPU cores without a GPU a frame
-takes about a second: about 18,000 frames for Table II and 64,000 for the two
-sweeps.  ``--frames``, ``--budgets`` and ``--resolution`` make a shorter one.
+Every run is a job of a plan (``phrt_addon/plan.py``): each sweep's own, and
+one plan of the other paths' runs of both scenes in ``out/paper/runs/``.  A
+complete job is skipped, so an interrupted ``make paper`` continues where it
+stopped.  On 2 CPU cores without a GPU a frame takes about a second: about
+18,000 frames for Table II and 64,000 for the two sweeps.  ``--frames``,
+``--budgets`` and ``--resolution`` make a shorter one; ``--workers N`` runs
+every plan on a Dask LocalCluster of N worker processes and ``--scheduler
+ADDRESS`` on an existing Dask cluster (``make paper WORKERS=N`` /
+``SCHEDULER=ADDRESS``, docs/cluster.md).
 
     python -m phrt.paper [--out out/paper] [--frames A-B] [--budgets N] [--resolution WxH]
+                         [--workers N | --scheduler ADDRESS]
 """
 from __future__ import annotations
 
@@ -36,11 +42,38 @@ def main(argv=None):
     parser.add_argument("--frames", default=None, help="frame range A-B of every path (default: all 1000)")
     parser.add_argument("--budgets", default=5, type=int, help="budgets of each sweep (default 5)")
     parser.add_argument("--resolution", default=None, help="WxH (default: the scenes' 640x480)")
+    parser.add_argument("--workers", default=None, type=int, metavar="N",
+                        help="run the plans on a Dask LocalCluster of N worker processes")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run the plans on the Dask cluster whose scheduler is at ADDRESS (docs/cluster.md)")
     args = parser.parse_args(argv)
     started = time.perf_counter()
     out = Path(args.out)
     from . import cli
-    from .engine import replay
+    from .engine import sweep as sweep_engine
+    from .phrt_addon import executors
+
+    cli._import_blender()
+    try:
+        executor = sweep_engine.make_executor(args.workers, args.scheduler)
+        if isinstance(executor, executors.DaskExecutor):
+            executor.start()
+            print(f"paper: running on the Dask cluster at {executor.address}; dashboard {executor.dashboard_link}",
+                  flush=True)
+    except executors.ExecutorError as error:
+        print(f"paper: error: {error}", file=sys.stderr)
+        return 2
+    try:
+        on_cluster = ["--scheduler", executor.address] if isinstance(executor, executors.DaskExecutor) else []
+        return _run(args, out, started, executor, on_cluster)
+    finally:
+        if isinstance(executor, executors.DaskExecutor):
+            executor.close()
+
+
+def _run(args, out, started, executor, on_cluster):
+    from . import cli
+    from .engine import sweep as sweep_engine
     from .phrt_addon import oracle, plan, report
 
     common = (["--frames", args.frames] if args.frames else []) + \
@@ -50,41 +83,55 @@ def main(argv=None):
         # path1: the sweep (its raster, raytrace and hybrid runs are Table II's too).
         sweep_dir = out / f"{scene_name}-{SWEPT_PATH}-sweep"
         status = cli.main(["sweep", scene_name, "--path", SWEPT_PATH, "--budgets", str(args.budgets),
-                           "--out", str(sweep_dir), *common])
+                           "--out", str(sweep_dir), *common, *on_cluster])
         if status != 0:
             return status
         swept = plan.read_plan(sweep_dir / plan.PLAN_JSON)
         run_dirs += [sweep_dir / job.id for job in swept.runs]
         oracle_dirs.append(sweep_dir / oracle.ORACLE_DIR)
-        for path in PATHS:
-            if path == SWEPT_PATH:
-                continue
-            # Raster and raytrace first: the hybrid run's budget (the scene's Budget At) resolves from them.
-            for mode in ("raster", "raytrace", "hybrid"):
-                run_dir = replay.default_run_dir(out / "runs", scene_name, path, mode)
-                if plan.run_is_complete(run_dir, _expected(run_dir, args, swept)):
-                    print(f"phrt: {run_dir}: complete, skipped")
-                else:
-                    status = cli.main(["render", scene_name, "--path", path, "--mode", mode, "--out", str(run_dir),
-                                       *common])
-                    if status != 0:
-                        return status
-                run_dirs.append(run_dir)
+    # The other paths of both scenes: one plan, each hybrid run after the raster and raytrace runs
+    # its budget (the scene's Budget At) resolves from.
+    others = other_paths_plan(swept.frames, swept.resolution)
+    plan_path = plan.write_plan(others, out / "runs")
+    total = len(others.jobs)
+    counter = [0]
+
+    def show(outcome):
+        counter[0] += 1
+        line = f"paper: [{counter[0]}/{total}] {outcome.job_id}: {outcome.status}"
+        if outcome.status == "done":
+            line += f" in {outcome.seconds:.1f} s ({outcome.message})"
+        elif outcome.status == "failed":
+            line += f": {outcome.message}"
+        print(line, flush=True)
+
+    outcomes = executor.run(plan_path, others, sweep_engine.execute_job, on_outcome=show)
+    failed = [outcome.job_id for outcome in outcomes if outcome.status == "failed"]
+    if failed:
+        print(f"paper: {len(failed)} runs failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    run_dirs += [out / "runs" / job.id for job in others.runs]
     files = report.build_report(run_dirs, out_dir=out / "report", oracle_dir=oracle_dirs)
     print(f"paper: report {files.markdown} ({len(run_dirs)} runs) in {time.perf_counter() - started:.0f} s")
     return 0
 
 
-def _expected(run_dir, args, swept):
-    """A plan-like record of what a complete run of another path looks like (frames, resolution)."""
+def other_paths_plan(frames, resolution):
+    """Raster, raytrace and hybrid (at the scene's own budget) runs of every path of both scenes
+    but the swept one, named ``<scene>-<path>-<mode>`` as ``phrt render`` names them."""
     from .phrt_addon import plan
-    from .sample_scenes.camera_paths import FRAMES
-    if args.frames:
-        start, end = (int(part) for part in args.frames.split("-"))
-    else:
-        start, end = 1, FRAMES  # the sample scenes' paths are keyed on every frame of 1..FRAMES
-    return plan.Plan(scene="", scene_label="", path="", frames=[start, end], resolution=list(swept.resolution),
-                     budgets=[], oracle_every=swept.oracle_every, jobs=[])
+    jobs = []
+    for scene_name in SCENES:
+        for path in PATHS:
+            if path == SWEPT_PATH:
+                continue
+            ids = {mode: plan.run_id(scene_name, path, mode) for mode in ("RASTER", "RAYTRACE", "HYBRID")}
+            jobs.append(plan.Job(ids["RASTER"], "run", "RASTER", scene=scene_name, path=path))
+            jobs.append(plan.Job(ids["RAYTRACE"], "run", "RAYTRACE", scene=scene_name, path=path))
+            jobs.append(plan.Job(ids["HYBRID"], "run", "HYBRID", scene=scene_name, path=path,
+                                 depends_on=[ids["RASTER"], ids["RAYTRACE"]]))
+    return plan.Plan(scene=SCENES[0], scene_label=SCENES[0], path=PATHS[0], frames=list(frames),
+                     resolution=list(resolution), budgets=[], oracle_every=0, jobs=jobs)
 
 
 if __name__ == "__main__":

@@ -125,13 +125,13 @@ class Plan:
                 raise ValueError(f"job '{job.id}' depends on unknown job(s) {', '.join(unknown)}")
         ordered, placed, pending = [], set(), list(self.jobs)
         while pending:
-            ready = [job for job in pending if all(dependency in placed for dependency in job.depends_on)]
-            if not ready:
+            ready = next((job for job in pending if all(dependency in placed for dependency in job.depends_on)),
+                         None)
+            if ready is None:
                 raise ValueError(f"jobs {', '.join(job.id for job in pending)} depend on each other")
-            for job in ready:
-                ordered.append(job)
-                placed.add(job.id)
-            pending = [job for job in pending if job.id not in placed]
+            ordered.append(ready)
+            placed.add(ready.id)
+            pending.remove(ready)
         return ordered
 
     @property

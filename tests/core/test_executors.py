@@ -120,3 +120,17 @@ def test_jobs_come_after_what_they_depend_on():
     built.jobs.append(plan.Job("b", "run", "RASTER", depends_on=["a"]))
     with pytest.raises(ValueError, match="depend on each other"):
         built.in_dependency_order()
+
+
+def test_the_papers_other_paths_are_one_plan_of_runs_named_as_phrt_render_names_them():
+    from phrt import paper
+    others = paper.other_paths_plan([1, 1000], [640, 480])
+    ids = [job.id for job in others.jobs]
+    assert len(ids) == len(set(ids)) == 2 * 2 * 3
+    assert ids[:3] == ["arcade-path2-raster", "arcade-path2-raytrace", "arcade-path2-hybrid"]
+    for job in others.jobs:
+        scene, label, path = others.target(job)
+        assert path != paper.SWEPT_PATH and job.id == f"{label}-{path}-{job.mode.lower()}"
+        if job.mode == "HYBRID":  # at the scene's own budget, resolved from its raster and raytrace runs
+            assert job.budget_at is None and job.depends_on == [f"{label}-{path}-raster", f"{label}-{path}-raytrace"]
+    assert [job.id for job in others.in_dependency_order()] == ids
