@@ -146,6 +146,7 @@ INSTALL_SCRIPT = textwrap.dedent("""
     bpy.ops.render.render(write_still=True)
     import embreex
     assert "bl_ext.user_default.phrt.engine" in sys.modules
+    assert "dask" not in sys.modules and "distributed" not in sys.modules  # optional: sweeps on a cluster only
     print("PHRT-ZIP-OK", embreex.__file__)
 """)
 
@@ -157,6 +158,10 @@ def test_user_installs_zip_and_renders(tmp_path):
                             "--out", str(dist)], capture_output=True, text=True, cwd=ROOT)
     assert build.returncode == 0, build.stdout + build.stderr
     zip_path = next(dist.glob("phrt-*-linux_x64.zip"))
+    import zipfile
+    bundled = [name for name in zipfile.ZipFile(zip_path).namelist() if name.startswith("wheels/")]
+    assert any("embreex" in name for name in bundled)
+    assert not [name for name in bundled if any(optional in name.lower() for optional in ("dask", "distributed", "bokeh"))]
     script = tmp_path / "install.py"
     script.write_text(INSTALL_SCRIPT)
     out = tmp_path / "frame.png"
