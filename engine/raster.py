@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..phrt_addon import rules
 from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
 from ..phrt_addon.scene import SceneSnapshot
 from ..phrt_addon.shadowmap import ShadowMap, light_views
@@ -33,13 +34,12 @@ void main() {
 }
 """
 
-GBUFFER_FRAG = """
+GBUFFER_FRAG = rules.GLSL_SAMPLE_TEXTURE + """
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) { n = -n; }
   vec4 albedo = base_color;
-  /* Wrap like the tracer (sample_texture): GPUTexture clamps to its edge by default. */
-  if (params.z > 0.5) { albedo *= texture(base_tex, fract(v_uv)); }
+  if (params.z > 0.5) { albedo *= phrt_sample_texture(base_tex, v_uv); }
   albedo = clamp(albedo, 0.0, 1.0);
   out_position = vec4(v_position, 1.0);
   out_normal = vec4(n, params.x);
@@ -60,9 +60,6 @@ DEPTH_FRAG = """
 void main() {
 }
 """
-
-MAX_TEXTURE_SIZE = 2048
-
 
 def _gpu():
     import gpu  # only inside render(): module-level gpu drawing is unavailable in background mode
@@ -88,7 +85,7 @@ class GeometryCache:
         entry = self._entries.get(mesh.geometry_key)
         if entry is None:
             corners = mesh.triangles.reshape(-1)
-            uvs = mesh.corner_uvs if mesh.corner_uvs is not None else np.zeros((len(corners), 2), np.float32)
+            uvs = rules.texture_coordinates(mesh.corner_uvs, len(corners))
             groups = [(material, element, np.ascontiguousarray(
                 (tris[:, None] * 3 + np.arange(3)[None, :]).astype(np.int32)))
                 for material, element, tris in mesh.material_groups()]
@@ -229,10 +226,7 @@ class RasterPass:
         key = material.texture_key or material.name
         texture = self.textures.get(key)
         if texture is None:
-            image = np.asarray(material.texture, dtype=np.float32)
-            height, width = image.shape[:2]
-            step = max(1, int(np.ceil(max(height, width) / MAX_TEXTURE_SIZE)))
-            image = np.ascontiguousarray(image[::step, ::step, :4])
+            image = rules.prepare_texture(material.texture)
             height, width = image.shape[:2]
             buffer = gpu.types.Buffer("FLOAT", width * height * 4, image.ravel())
             texture = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buffer)
@@ -357,8 +351,8 @@ class RasterPass:
                     for mesh, groups in self.batches:
                         shader.uniform_float("model", _matrix_list(self._model_relative(mesh.matrix_world, view.origin)))
                         for material_index, _, batch in groups:
-                            if self.snapshot.materials[material_index].transmission > 0.5:
-                                continue  # glass and water do not cast raster shadows
+                            if not rules.casts_shadow(self.snapshot.materials[material_index]):
+                                continue  # glass, water, alpha cards: rules.casts_shadow
                             batch.draw(shader)
                     buffer = gpu.types.Buffer("FLOAT", view.size * view.size)
                     framebuffer.read_depth(0, 0, view.size, view.size, data=buffer)

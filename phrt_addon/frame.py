@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import heuristic, shading
+from . import heuristic, rules, shading
 from .cost_model import CostModel, FrameStats
-from .gbuffer import GBuffer, element_pixel_stats
+from .gbuffer import GBuffer, element_pixel_stats, geometric_normals
 from .scene import SceneSnapshot, transform_points
 from .shadowmap import shadow_visibility
 
@@ -128,7 +128,7 @@ class FrameRenderer:
             if shadow_lights and mode != "RASTER" else np.zeros(n_elements)
         frame_elements = heuristic.FrameElements(
             names=[e.name for e in snapshot.elements],
-            candidate=np.array([e.candidate for e in snapshot.elements], bool),
+            candidate=np.array([e.is_candidate for e in snapshot.elements], bool),
             area_px=area_px, centre_ndc=centre_ndc, distance=distance,
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
@@ -222,7 +222,7 @@ class FrameRenderer:
                 transmission=materials.transmission[material].astype(np.float32),
                 ior=materials.ior[material].astype(np.float32),
                 emission=materials.emission[material].astype(np.float32))
-            layers[name] = {"flat": flat, "world": world, "surface": surface, "material": material,
+            layers[name] = {"name": name, "flat": flat, "world": world, "surface": surface, "material": material,
                             "element": layer.element.ravel()[flat], "directions": view_dirs,
                             "origin": gbuffer.origin}
         return layers
@@ -238,7 +238,7 @@ class FrameRenderer:
         points = samples["world"][::FOOTPRINT_STEP * FOOTPRINT_STEP]
         scale = FOOTPRINT_STEP * FOOTPRINT_STEP
         casters = [index for index, element in enumerate(snapshot.elements)
-                   if element.candidate and element.shadows and area_px[index] > 0
+                   if element.is_candidate and element.shadows and area_px[index] > 0
                    and element_bounds[index] is not None]
         for light in snapshot.lights:
             if not light.cast_shadows or not casters:
@@ -251,17 +251,24 @@ class FrameRenderer:
     # ------------------------------------------------------------------
     def _trace(self, snapshot, gbuffer, layers, materials, selected, element_bounds, visibility,
                reflection_radiance, refraction_radiance, counters, element_rays):
-        from .tracer import RadianceTracer, TraceScene, ray_epsilon, reflection_blend
+        from .tracer import RadianceTracer, TraceScene, leave_surface, reflection_blend
 
-        start = _timer()
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
-        transparent_materials = np.array([m.is_transparent for m in snapshot.materials], bool)
-        counters.upload_ms = self.trace_scene.update(snapshot, transparent_materials)
+        counters.upload_ms = self.trace_scene.update(snapshot, materials.casts_shadow[:len(snapshot.materials)])
         scene = self.trace_scene
-        textures = {index: m.texture for index, m in enumerate(snapshot.materials) if m.texture is not None}
+        textures = {index: prepared_texture(m.texture) for index, m in enumerate(snapshot.materials)
+                    if m.texture is not None}
         tracer = RadianceTracer(scene, snapshot, materials, textures)
         elements = snapshot.elements
+        layer_of = {"opaque": gbuffer.opaque, "transparent": gbuffer.transparent}
+
+        def ray_start(samples, idx):
+            """Trace-frame points, their geometric normals facing the camera and ray offsets."""
+            points_trace = scene.to_trace(samples["world"][idx])  # only the pixels that get rays
+            normal = geometric_normals(layer_of[samples["name"]], samples["flat"][idx], samples["directions"][idx])
+            eps = scene.epsilon(points_trace, _camera_distance(samples, idx), element=samples["element"][idx])
+            return points_trace, normal, eps
 
         # Shadows: for each light, the pixels a selected shadow caster can shadow get traced visibility.
         start = _timer()
@@ -269,7 +276,6 @@ class FrameRenderer:
         for layer_name, samples in layers.items():
             if not casters or len(samples["world"]) == 0:
                 continue
-            surface = samples["surface"]
             for light_index, light in enumerate(snapshot.lights):
                 terms = visibility[layer_name][light_index]
                 if not light.cast_shadows or len(terms.active) == 0:
@@ -284,19 +290,22 @@ class FrameRenderer:
                 if len(local) == 0:
                     continue
                 idx = terms.active[local]
-                points_trace = scene.to_trace(samples["world"][idx])  # only the pixels that get rays
-                eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
+                points_trace, normal, eps = ray_start(samples, idx)
                 _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                origins = points_trace + surface.normal[idx] * eps[:, None]
+                origins = points_trace + normal * eps[:, None]
                 blocked = scene.occluded(origins, terms.direction[local], distance - 2 * eps)
                 terms.visibility[local] = np.where(blocked, 0.0, 1.0)
                 counters.shadow_rays += len(idx)
         counters.shadow_ms = _ms(start)
+        # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
+        bounces = int(snapshot.settings.max_bounces) >= 1
 
         # Reflections on selected elements' pixels (mirror direction, blended by roughness).
         start = _timer()
         rays_before = tracer.rays + tracer.shadow_rays
         for layer_name, samples in layers.items():
+            if not bounces:
+                break
             surface = samples["surface"]
             element_of = samples["element"]
             wanted = np.zeros(len(element_of), bool)
@@ -307,10 +316,9 @@ class FrameRenderer:
             idx = np.flatnonzero(wanted)
             if len(idx) == 0:
                 continue
-            points_trace = scene.to_trace(samples["world"][idx])
-            eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
-            direction = shading.reflect(samples["directions"][idx], surface.normal[idx])
-            radiance = tracer.radiance(points_trace + surface.normal[idx] * eps[:, None], direction, 1)
+            points_trace, normal, eps = ray_start(samples, idx)
+            direction = leave_surface(shading.reflect(samples["directions"][idx], surface.normal[idx]), normal)
+            radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
             reflection_radiance[layer_name] = (idx, radiance)
             np.add.at(element_rays, element_of[idx], 1)
         counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
@@ -320,20 +328,20 @@ class FrameRenderer:
         start = _timer()
         rays_before = tracer.rays + tracer.shadow_rays
         samples = layers["transparent"]
-        if len(samples["world"]):
+        if bounces and len(samples["world"]):
             surface = samples["surface"]
             element_of = samples["element"]
             wanted = np.zeros(len(element_of), bool)
             for index in np.flatnonzero(selected):
                 if elements[index].refractions:
                     wanted |= element_of == index
-            wanted &= surface.transmission > 1e-3
+            wanted &= materials.transmissive[samples["material"]] > rules.TRANSPARENT_EPSILON
             idx = np.flatnonzero(wanted)
             if len(idx):
-                points_trace = scene.to_trace(samples["world"][idx])
-                eps = ray_epsilon(points_trace, scene.extent, _camera_distance(samples, idx))
+                points_trace, normal, eps = ray_start(samples, idx)
                 direction, _ = shading.refract(samples["directions"][idx], surface.normal[idx], 1.0 / surface.ior[idx])
-                radiance = tracer.radiance(points_trace - surface.normal[idx] * eps[:, None], direction, 1)
+                direction = leave_surface(direction, normal, side=-1.0)
+                radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
                 refraction_radiance["transparent"] = (idx, radiance)
                 np.add.at(element_rays, element_of[idx], 1)
         counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
@@ -378,20 +386,22 @@ class FrameRenderer:
             color, transmissive, fresnel_t = shaded["transparent"]
             surface = transparent["surface"]
             behind = image[transparent["flat"]].copy()  # raster: straight through, no bending
+            refracted = behind.copy()  # the transmissive part: bent where traced
             if "transparent" in refraction_radiance:
                 idx, radiance = refraction_radiance["transparent"]
-                behind[idx] = radiance
+                refracted[idx] = radiance
             tint = surface.albedo
-            transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * tint * behind
+            transmitted = (transmissive * (1.0 - fresnel_t))[:, None] * tint * refracted
             alpha = materials.alpha[transparent["material"]][:, None]
             surface_color = color + transmitted
+            # The 1 - alpha part goes straight on (as the tracer's pass-through does).
             image[transparent["flat"]] = alpha * surface_color + (1.0 - alpha) * behind
         image = shading.finite(image).reshape(height, width, 3)
 
         combined = np.ones((height, width, 4), np.float32)
         combined[..., :3] = image
         front = gbuffer.front_element()
-        candidate_flags = np.array([e.candidate for e in snapshot.elements] + [False], bool)
+        candidate_flags = np.array([e.is_candidate for e in snapshot.elements] + [False], bool)
         selected_flags = np.r_[np.asarray(selected, bool), False]
         depth = np.where(np.isfinite(gbuffer.view_depth), gbuffer.view_depth, 1e10).astype(np.float32)
         return FramePasses(
@@ -416,6 +426,19 @@ class _Counters:
     @property
     def rays(self):
         return self.shadow_rays + self.reflection_rays + self.refraction_rays
+
+
+_PREPARED = {}  # id(texture) -> (texture, prepared): prepared once per image, not per frame
+
+
+def prepared_texture(texture):
+    """``rules.prepare_texture`` of a snapshot's texture, cached while the image lives."""
+    entry = _PREPARED.get(id(texture))
+    if entry is None or entry[0] is not texture:
+        if len(_PREPARED) > 64:
+            _PREPARED.clear()
+        entry = _PREPARED[id(texture)] = (texture, rules.prepare_texture(texture))
+    return entry[1]
 
 
 def _camera_distance(samples, index=slice(None)):
@@ -607,16 +630,18 @@ class ShadowRegionIndex:
 
 
 def _rays_per_pixel(snapshot, area_px, footprint, max_bounces):
-    """Rays one pixel of each element costs with its effects (input of the measured cost model)."""
+    """Rays one pixel of each element costs with its effects (input of the measured cost model).
+    Reflections and refractions are bounces: none with ``max_bounces`` 0."""
     rays = np.zeros(len(snapshot.elements))
     safe_area = np.maximum(area_px, 1)
+    bounces = int(max_bounces) >= 1
     for index, element in enumerate(snapshot.elements):
         per_pixel = 0.0
         if element.shadows:
             per_pixel += footprint[index] / safe_area[index]
-        if element.reflections:
+        if element.reflections and bounces:
             per_pixel += 1.0 + len(snapshot.lights)  # the reflection ray and its hit's shadow rays
-        if element.refractions:
+        if element.refractions and bounces:
             per_pixel += 2.0 + len(snapshot.lights)  # in, out, and the hit's shadow rays
         rays[index] = per_pixel
     return rays
