@@ -27,6 +27,7 @@ import numpy as np
 from . import heuristic, rules, shading
 from .cost_model import CostModel, FrameStats
 from .gbuffer import GBuffer, element_pixel_stats, geometric_normals
+from .problems import ProblemLog
 from .scene import SceneSnapshot, transform_points
 from .shadowmap import shadow_visibility
 
@@ -87,6 +88,7 @@ class FrameRenderer:
         self.previous_selection = {}
         self.trace_scene = None
         self.frames_rendered = 0
+        self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
 
     def close(self):
         if self.trace_scene is not None:
