@@ -23,6 +23,7 @@ Plain Python, no ``bpy``: the caller passes the Blender and embreex versions.
 import csv
 import json
 import struct
+from array import array
 import logging
 import math
 import os
@@ -213,13 +214,15 @@ class RunLog:
         self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
                                     extra_selection_columns)
         self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
-        self._frame_rows = []
-        self._selection_states = []
+        # What summary.json needs, kept compact (a 1000-frame replay must not grow with its length
+        # more than it must): one tuple per frame, per element its frames and selected flags.
+        self._frame_values = []
+        self._selection_states = {}  # element -> (array of frames, bytearray of selected flags)
         self._closed = False
 
     @property
     def frame_count(self):
-        return len(self._frame_rows)
+        return len(self._frame_values)
 
     def add_frame(self, frame_row, selection_rows=()):
         """Append one frame (and its selection rows) and flush both CSVs."""
@@ -244,10 +247,14 @@ class RunLog:
         self._selection.flush()
         self._frames.write([frame_row])
         self._frames.flush()
-        self._frame_rows.append({key: frame_row.get(key) for key in FRAME_COLUMNS})
-        self._selection_states.extend(
-            {"frame": int(frame), "element": str(row["element"]), "selected": bool(row["selected"])}
-            for row in selection_rows)
+        self._frame_values.append(tuple(frame_row.get(key) for key in FRAME_COLUMNS))
+        for row in selection_rows:
+            element = str(row["element"])
+            states = self._selection_states.get(element)
+            if states is None:
+                states = self._selection_states[element] = (array("q"), bytearray())
+            states[0].append(int(frame))
+            states[1].append(1 if row["selected"] else 0)
 
     def close(self, summary_extra):
         """Close both CSVs and write ``summary.json``; returns the summary dict.
@@ -265,11 +272,15 @@ class RunLog:
             self._close_files()
         except OSError:
             pass  # a CSV could not take its last bytes (a full disk, reported by the writer): its complete rows stay
-        first = self._frame_rows[0] if self._frame_rows else {}
+        frame_rows = [dict(zip(FRAME_COLUMNS, values)) for values in self._frame_values]
+        selection_states = [{"frame": frame, "element": element, "selected": bool(selected)}
+                            for element, (frames, flags) in self._selection_states.items()
+                            for frame, selected in zip(frames, flags)]
+        first = frame_rows[0] if frame_rows else {}
         summary = {"scene": summary_extra["scene"], "path": summary_extra["path"],
                    "mode": first.get("mode"), "resolution": summary_extra["resolution"],
                    "budget_ms": first.get("budget_ms")}
-        summary.update(summarize(self._frame_rows, self._selection_states))
+        summary.update(summarize(frame_rows, selection_states))
         summary["non_finite_values_dropped"] = self._frames.non_finite + self._selection.non_finite
         summary["machine"] = machine_info()
         summary.update(summary_extra)

@@ -261,3 +261,13 @@ def test_a_signal_stops_the_replay_between_frames_and_keeps_everything_complete(
     assert 2 <= len(frames) < FRAMES
     assert [int(image.stem) for image in images] == [row["frame"] for row in frames]
     assert summary["frames_planned"] == FRAMES and not summary.get("error")
+
+
+def test_the_operator_refuses_a_folder_it_cannot_create(files, tmp_path):
+    """As root every permission check passes: a read-only file system (/proc) is what refuses."""
+    bpy.ops.wm.open_mainfile(filepath=str(files / "path.blend"))
+    try:
+        with pytest.raises(RuntimeError, match="cannot write to output folder"):
+            bpy.ops.phrt.replay_path(output_dir="/proc/phrt-out", frame_start=1, frame_end=2)
+    finally:
+        bpy.ops.wm.read_homefile(use_empty=True)

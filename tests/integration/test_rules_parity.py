@@ -213,6 +213,7 @@ def mirror_and_glass_scene(max_bounces):
     scene = showcase.empty_scene(WIDTH, HEIGHT)
     scene.phrt.shadow_map_size = 256
     scene.phrt.max_bounces = max_bounces
+    assert scene.phrt.max_bounces == max_bounces  # 32 is allowed, not clamped by the property
     set_world(scene, (0.0, 0.0, 1.0))
     showcase.mesh_object("Floor", showcase.plane(10.0), showcase.principled("Floor", (0.8, 0.7, 0.5), roughness=1.0))
     mirror = showcase.mesh_object("Mirror", showcase.sphere(0.6, 32, 16),
