@@ -32,8 +32,9 @@ bench: $(STAMP)
 	$(PY) -m phrt.bench
 
 # Long runs kept out of `make test` (tools/soak.py): a 1000-frame HYBRID replay of arcade at
-# 320x240 (RSS after frame 100 vs 1000 < 50 MB, GPU/Embree objects created == freed) and a
-# 2-million-triangle mesh in the three modes. ~10 min on 2 cores; figures in out/soak/soak.json.
+# 320x240, budget 600 ms (RSS after frame 100 vs 1000 < 50 MB, GPU/Embree objects created ==
+# freed) and a 2-million-triangle mesh in the three modes. ~15 min on 2 cores; figures in
+# out/soak/soak.json.
 soak: $(STAMP)
 	$(PY) tools/soak.py --out out/soak
 

@@ -1,12 +1,13 @@
 """``make soak``: long runs that are too slow for ``make test``.
 
 1. A 1000-frame HYBRID replay of a sample scene (default: arcade, path1, 320x240, budget
-   600 ms: about twice the raster frame there, so elements are traced), in this process through the same replay code as ``phrt render``.  Resident memory
-   (VmRSS) is sampled after every frame: the run passes when RSS after frame 1000 is less than
-   50 MB above RSS after frame 100 (the first frames warm caches: shaders, Embree scenes,
-   shadow maps).  Every GPU object (textures, frame buffers, vertex/index buffers, batches,
-   uniform buffers, offscreens, shaders) and every Embree scene the engine creates is counted,
-   and counted again when the engine lets go of it; after the replay and ``release_caches()``
+   600 ms: about twice the raster frame there, so elements are traced), in this process
+   through the same replay code as ``phrt render``.  Resident memory (VmRSS) is sampled
+   after every frame: the run passes when RSS after frame 1000 is less than 50 MB above RSS
+   after frame 100 (the first frames warm caches: shaders, Embree scenes, shadow maps).
+   Every GPU object (textures, frame buffers, vertex/index buffers, batches, uniform
+   buffers, offscreens, shaders) and every Embree scene the engine creates is counted, and
+   counted again when the engine lets go of it; after the replay and ``release_caches()``
    the two counts must be equal.
 2. A 2-million-triangle mesh (a displaced 1000 x 1000 grid, a ray tracing candidate with
    shadows and reflections, beside a mirror sphere) rendered in RASTER, HYBRID and RAYTRACE
