@@ -19,6 +19,7 @@ import argparse
 import contextlib
 import math
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -274,6 +275,12 @@ def command_render(args):
                                           on_progress=progress, budget_at=args.budget_at)
     except replay_module.ReplayError as error:
         raise UserError(str(error)) from None
+    for line in result.problems:  # each problem of the scene once, with its count
+        print(f"phrt: warning: {line}", file=sys.stderr)
+    if result.signal:
+        print(f"phrt: interrupted by {result.signal}: {result.frames_done} of {frame_range[1] - frame_range[0] + 1} "
+              f"frames written to {out} (summary.json says partial)", file=sys.stderr)
+        return 128 + int(getattr(signal, result.signal))
     summary = result.summary or {}
     total = summary.get("total_ms", {})
     source = summary.get("budget_source")

@@ -151,8 +151,10 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
     )
     max_bounces: IntProperty(
         name="Max Bounces",
-        description="Maximum depth of reflection and refraction rays",
-        default=defaults.MAX_BOUNCES, min=0, max=16,
+        description="Reflection and refraction rays traced one after another from a ray traced surface: "
+                    "0 traces none (the raster look, traced shadows only), 1 one bounce (a mirror shows what "
+                    "it faces, glass bends once and light then goes straight on), and so on",
+        default=defaults.MAX_BOUNCES, min=0, max=64, soft_max=16,
     )
     cost_mode: EnumProperty(
         name="Cost Model",

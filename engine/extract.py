@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import compat
+from ..phrt_addon import rules
 from ..phrt_addon.scene import (Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings,
                                 geometry_key)
 
@@ -71,7 +72,7 @@ def _read_mesh(mesh):
     if mesh.uv_layers.active is not None and len(mesh.loops):
         uv_all = np.empty(len(mesh.loops) * 2, np.float32)
         mesh.uv_layers.active.uv.foreach_get("vector", uv_all)
-        corner_uvs = uv_all.reshape(-1, 2)[loops]
+        corner_uvs = rules.texture_coordinates(uv_all.reshape(-1, 2)[loops], len(loops))
     value = (positions, triangles.reshape(-1, 3), np.ascontiguousarray(corner_normals), corner_uvs, slots)
     MESH_CACHE.put(key, value)
     return value
@@ -92,7 +93,7 @@ def _image_pixels(image, problems):
         pixels = pixels.reshape(height, width, 4)
         if not image.is_float and image.colorspace_settings.name.lower().startswith("srgb"):
             pixels[..., :3] = _srgb_to_linear(pixels[..., :3])
-        pixels = np.nan_to_num(pixels, nan=0.0, posinf=1.0, neginf=0.0)
+        pixels = rules.prepare_texture(pixels)  # what raster and tracer both sample
         TEXTURE_CACHE[key] = pixels
         return pixels, "/".join(map(str, key))
     except Exception as error:  # a missing file or a broken image must not stop the frame

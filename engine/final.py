@@ -18,6 +18,7 @@ import traceback
 import numpy as np
 
 from ..phrt_addon.frame import FrameRenderer
+from ..phrt_addon.problems import ProblemLog
 from . import extract, gpu_resources, raster
 
 _STANDALONE = {}  # scene name -> FrameRenderer when no replay session is active
@@ -81,6 +82,7 @@ def rasterize(snapshot):
 class FinalRender:
     def __init__(self, engine):
         self.engine = engine
+        self.problems = ProblemLog()  # one engine instance renders all frames of an animation
 
     def render(self, depsgraph):
         engine = self.engine
@@ -89,7 +91,9 @@ class FinalRender:
         start = time.perf_counter()
         snapshot = extract.extract(depsgraph, camera_override=session.camera if session else None,
                                    settings_override=session.settings_override if session else None)
-        for problem in snapshot.problems:
+        # Each problem is told once per replay or animation render, not on every frame.
+        problem_log = session.renderer.problems if session is not None else self.problems
+        for problem in problem_log.report(snapshot.problems, snapshot.frame):
             engine.report({"WARNING"}, f"PHRT: {problem}")
         extract_ms = (time.perf_counter() - start) * 1000.0
         width, height = snapshot.camera.width, snapshot.camera.height

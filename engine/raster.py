@@ -25,15 +25,15 @@ import time
 
 import numpy as np
 
-from ..phrt_addon import shading
+from ..phrt_addon import rules, shading
 from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
 from ..phrt_addon.scene import SceneSnapshot
 from ..phrt_addon.shadowmap import ShadowMap, light_views
 from . import shaders
 from .gpu_resources import RESOURCES, GPUResources, ShadowAtlas, gpu_module
 
-# Element indices are stored +1 in a 32-bit target (0 = no element).
-MAX_ELEMENTS = 0xFFFFFFFF - 1
+# Material indices are stored +1 in the float position target's w: exact to 2^24.
+MAX_MATERIALS = (1 << 24) - 1
 
 
 def _matrix_list(matrix) -> list:
@@ -57,19 +57,15 @@ def _ubo(gpu, values):
 
 
 def shadow_key(light, snapshot, size) -> str:
-    """Identifies a light's shadow maps: the light's own parameters and every mesh's content
-    and placement (what the maps see)."""
+    """Identifies a light's shadow maps: the light's own parameters, which materials cast
+    shadows (rules.casts_shadow) and every mesh's content and placement (what the maps see)."""
     digest = hashlib.blake2b(digest_size=16)
     digest.update(repr((light.kind, tuple(light.position), tuple(light.direction), light.spot_size, size)).encode())
+    digest.update(bytes(rules.casts_shadow(material) for material in snapshot.materials))
     for mesh in snapshot.meshes:
         digest.update(mesh.geometry_key.encode())
         digest.update(np.asarray(mesh.matrix_world, np.float64).tobytes())
     return digest.hexdigest()
-
-
-def casts_raster_shadow(material) -> bool:
-    """Glass and water do not cast raster shadows."""
-    return material.transmission <= 0.5
 
 
 class GPUFrame:
@@ -92,6 +88,12 @@ class GPUFrame:
     # -- protocol --------------------------------------------------------------
     def draw(self):
         """G-buffer, resolve and its read-back, shadow maps; sets raster_ms and setup_ms."""
+        if len(self.snapshot.elements) > rules.MAX_ELEMENTS:
+            raise ValueError(f"{len(self.snapshot.elements)} ray tracing elements: the G-buffer tells at most "
+                             f"{rules.MAX_ELEMENTS} apart; tag fewer objects or materials")
+        if len(self.snapshot.materials) > MAX_MATERIALS:
+            raise ValueError(f"{len(self.snapshot.materials)} materials: the G-buffer tells at most "
+                             f"{MAX_MATERIALS} apart")
         gpu = gpu_module()
         start = time.perf_counter()
         created_before = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
@@ -327,7 +329,7 @@ class GPUFrame:
                 for mesh, groups in self._draw_list:
                     shader.uniform_float("model", _matrix_list(_model_relative(mesh.matrix_world, view.origin)))
                     for material_index, _, batch in groups:
-                        if casts_raster_shadow(self.snapshot.materials[material_index]):
+                        if rules.casts_shadow(self.snapshot.materials[material_index]):
                             batch.draw(shader)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)

@@ -6,7 +6,7 @@ Two ways to run, same files:
 - In the UI (invoked from the N panel, F3, a button): a modal operator renders one
   frame per timer tick, shows progress (cursor counter and status bar) and stops
   between frames on Esc.  What was rendered stays valid: complete frames, flushed
-  logs and a ``summary.json`` marked ``"cancelled": true``.
+  logs and a ``summary.json`` marked ``"cancelled": true`` and ``"partial": true``.
 - From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
   ``engine.replay.replay()`` runs every frame of every mode to the end.
 
@@ -147,6 +147,8 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                 results.append(replay.replay(
                     scene, camera, frame_range, mode, self._run_dir(context, camera, mode, root),
                     images=self.images.lower(), scene_label=scene_label(scene), on_progress=progress))
+                if results[-1].signal:  # SIGINT / SIGTERM (blender -b): no further mode
+                    break
         except (replay.ReplayError, RuntimeError) as error:
             self.report({"ERROR"}, f"PHRT: replay of '{camera.name}' failed: {error}")
             return {"CANCELLED"}
@@ -154,11 +156,15 @@ class PHRT_OT_replay_path(bpy.types.Operator):
             window_manager.progress_end()
             _refresh_candidates(context)
         self._report_done(results, cancelled=False)
-        return {"FINISHED"}
+        return {"CANCELLED"} if any(result.signal for result in results) else {"FINISHED"}
 
     def _report_done(self, results, cancelled):
         runs = ", ".join(f"{result.mode.lower()} {result.frames_done} frames -> {result.run_dir}" for result in results)
+        cancelled = cancelled or any(result.cancelled for result in results)
         verb = "cancelled" if cancelled else "done"
+        # Each problem once per run, with its count (the frames warned only the first time).
+        for line in dict.fromkeys(line for result in results for line in result.problems):
+            self.report({"WARNING"}, f"PHRT: {line}")
         self.report({"WARNING" if cancelled else "INFO"}, f"PHRT replay {verb}: {runs or 'nothing rendered'}")
 
     # -- interactive: one frame per timer tick, Esc stops -----------------------------

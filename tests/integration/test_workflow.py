@@ -420,6 +420,7 @@ def test_replay_of_thirty_frames_from_a_saved_blend(scene, tmp_path):
     run_dir = replay.default_run_dir(tmp_path / "runs", "showcase", "Camera", "HYBRID")
     frame_rows, selection, summary = check_run(run_dir, range(1, PATH_FRAMES + 1), "HYBRID")
     assert summary["scene"] == "showcase" and summary["path"] == "Camera" and not summary["cancelled"]
+    assert summary["partial"] is False and summary["frames_planned"] == PATH_FRAMES
     assert summary["frame_range"] == [1, PATH_FRAMES]
     channels = read_passes(run_dir / "frames" / "0030.exr")
     assert {"Combined.R", "Depth.Z", "Normal.X", "PHRT Selected.X", "PHRT Candidate.X"} <= set(channels)
@@ -476,6 +477,7 @@ def test_cancelled_replay_keeps_complete_frames_and_logs(scene, tmp_path):
     assert result.cancelled and result.frames_done == 4
     check_run(tmp_path / "run", [1, 2, 3, 4], "HYBRID")
     assert runlog.read_summary(tmp_path / "run")["cancelled"] is True
+    assert runlog.read_summary(tmp_path / "run")["partial"] is True
     assert len(runlog.read_selection(tmp_path / "run")) == 4 * 5
 
 
@@ -491,7 +493,7 @@ def test_stepped_replay_cancelled_by_esc_keeps_what_was_rendered(scene, tmp_path
     result = run.finish(cancelled=True)
     assert result.cancelled and result.frames_done == 3 and final.ACTIVE_SESSION is None
     _, _, summary = check_run(tmp_path / "run", [1, 2, 3], "HYBRID")
-    assert summary["cancelled"] is True and summary["scene"] == "showcase"
+    assert summary["cancelled"] is True and summary["partial"] is True and summary["scene"] == "showcase"
     assert scene.frame_current == 1 and scene.render.filepath == filepath
 
 
