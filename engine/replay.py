@@ -25,6 +25,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import sys
+import tempfile
 import signal
 import threading
 import time
@@ -245,14 +247,16 @@ class SteppedReplay:
             # Written under a temporary name, renamed once complete (see _commit_image).
             render.filepath = str(self._partial_image(frame))
             begin = time.perf_counter()
-            bpy.ops.render.render(write_still=self.images != "none")
+            with _captured_stderr() as blender_said:
+                bpy.ops.render.render(write_still=self.images != "none")
             wall_ms = (time.perf_counter() - begin) * 1000.0
             result = session.last_result
             if result is None:  # a failed render raises RuntimeError: this one was stopped
                 self._drop_partial_images(frame)
                 raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
             if self.images != "none":
-                self._commit_image(frame)
+                self._commit_image(frame, blender_said)
+            blender_said.forward()
             row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
             row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
@@ -278,15 +282,18 @@ class SteppedReplay:
         for image in self.frames_dir.glob(f".{frame:04d}.partial*"):
             image.unlink(missing_ok=True)
 
-    def _commit_image(self, frame):
+    def _commit_image(self, frame, blender_said=None):
         """Give the frame's image its name once it is complete; a writer that hit a full disk
-        leaves a file that ends early, with no error from Blender: it is removed and reported."""
+        leaves a file that ends early, with no error from Blender (or only a line on stderr, on
+        4.5): it is removed and reported in one line."""
         extension = ".exr" if self.images == "exr" else ".png"
         partial = self.frames_dir / f".{frame:04d}.partial{extension}"
         if not runlog.image_is_complete(partial):
             self._drop_partial_images(frame)
+            reason = blender_said.reason() if blender_said is not None else ""
             raise ReplayError(f"frame {frame} could not be written completely to '{self.frames_dir}' (is the disk "
-                              f"full, or a file-size limit reached?); the {self.done} frames before it are complete")
+                              f"full, or a file-size limit reached?{' Blender: ' + reason if reason else ''}); "
+                              f"the {self.done} frames before it are complete")
         os.replace(partial, self.frames_dir / f"{frame:04d}{extension}")
 
     def _fail(self, error):
@@ -419,6 +426,46 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
 
 EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
                        "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
+
+
+class _CapturedStderr:
+    """What Blender's C code wrote on stderr while rendering a frame: forwarded as it was once
+    the frame is known good, or summed up in the one-line error when it is not."""
+
+    def __init__(self):
+        self.text = ""
+
+    def reason(self) -> str:
+        """The last line that names an error, shortened (e.g. OpenEXR's 'File too large')."""
+        lines = [line.strip() for line in self.text.splitlines() if "error" in line.lower()]
+        if not lines:
+            return ""
+        line = lines[-1]
+        return line.rsplit(". ", 1)[-1][:120] if ". " in line else line[:120]
+
+    def forward(self):
+        if self.text:
+            sys.stderr.write(self.text)
+            sys.stderr.flush()
+
+
+@contextlib.contextmanager
+def _captured_stderr():
+    """Route file descriptor 2 (where Blender's C code writes) to a temporary file while the
+    block runs; the text is kept on the yielded object."""
+    captured = _CapturedStderr()
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as capture:
+        os.dup2(capture.fileno(), 2)
+        try:
+            yield captured
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            capture.seek(0)
+            captured.text = capture.read().decode(errors="replace")
 
 
 def default_run_dir(out_root, scene_label, camera_name, mode) -> Path:

@@ -12,6 +12,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
+from phrt import compat
 from phrt.engine import extract, final
 from phrt.phrt_addon import metrics
 from exr_passes import read_passes
@@ -37,7 +38,7 @@ def render(scene, mode, name, tmp_path):
     scene.render.engine = "PHRT"
     scene.phrt.mode = mode
     settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
+    compat.set_image_format(settings, compat.MULTILAYER_EXR)
     settings.color_depth = "32"
     scene.render.use_file_extension = True
     path = Path(tmp_path) / f"{name}-{mode}.exr"

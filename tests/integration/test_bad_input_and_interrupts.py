@@ -22,6 +22,7 @@ import bpy
 import numpy as np
 import pytest
 
+from phrt import compat
 from phrt.phrt_addon import runlog
 from phrt.sample_scenes import showcase
 from exr_passes import read_passes
@@ -58,7 +59,7 @@ def files(blender, tmp_path_factory):
     camera_path(scene, 3)
     showcase.mesh_object("NoMaterial", showcase.cube(0.5), None, location=(0.8, -1.0, 0.25))
     for name, datablock in (("Hair", bpy.data.hair_curves.new("Hair")), ("Smoke", bpy.data.volumes.new("Smoke")),
-                            ("Sketch", bpy.data.grease_pencils.new("Sketch"))):
+                            ("Sketch", compat.new_grease_pencil("Sketch"))):
         scene.collection.objects.link(bpy.data.objects.new(name, datablock))
     curve = bpy.data.curves.new("Rope", "CURVE")
     curve.bevel_depth = 0.05
