@@ -437,7 +437,8 @@ class _CapturedStderr:
 
     def reason(self) -> str:
         """The last line that names an error, shortened (e.g. OpenEXR's 'File too large')."""
-        lines = [line.strip() for line in self.text.splitlines() if "error" in line.lower()]
+        lines = [line.strip() for line in self.text.splitlines()
+                 if "error" in line.lower() and not line.startswith("EGL")]  # EGL_BAD_MATCH is harmless noise
         if not lines:
             return ""
         line = lines[-1]
