@@ -7,7 +7,12 @@ detaches in ``unregister()``.
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
-from .phrt_addon import defaults
+from .phrt_addon import defaults, schema
+
+
+def _enum_items(items):
+    """EnumProperty items with explicit indices from a ``schema`` table (identifier, name, description)."""
+    return tuple((identifier, name, description, index) for index, (identifier, name, description) in enumerate(items))
 
 
 def _refresh_candidate_list(self, context):
@@ -93,11 +98,7 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
     mode: EnumProperty(
         name="Mode",
         description="How PHRT renders the frame",
-        items=(
-            ("RASTER", "Raster", "Raster only: G-buffer, shadow maps and blending; no ray tracing at all", 0),
-            ("HYBRID", "Hybrid", "Raster plus ray tracing of the elements the heuristic selects within the budget", 1),
-            ("RAYTRACE", "Ray Trace", "Ray trace every visible candidate with no budget: the reference image", 2),
-        ),
+        items=_enum_items(schema.MODE_ITEMS),
         default="HYBRID",
     )
     budget_ms: FloatProperty(
@@ -122,20 +123,13 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
         name="Relevance",
         description="What the heuristic's relevance R weighs: the paper's visibility, or visibility times "
                     "how much tracing the element changes its pixels",
-        items=(
-            ("PAPER", "Paper", "R = (S * I + V) * K, the paper's equation (3)", 0),
-            ("ERROR", "Error-Aware", "V weighted by a running estimate of the element's traced-vs-raster "
-                                     "difference per pixel (a prior from its material before it is traced)", 1),
-        ),
+        items=_enum_items(schema.RELEVANCE_ITEMS),
         default="PAPER",
     )
     selection_order: EnumProperty(
         name="Greedy Order",
         description="Order in which the selection pass takes elements that fit the time left",
-        items=(
-            ("RELEVANCE", "Relevance", "The paper's: the most relevant element first", 0),
-            ("RELEVANCE_PER_MS", "Relevance per ms", "Relevance divided by the predicted milliseconds first", 1),
-        ),
+        items=_enum_items(schema.ORDER_ITEMS),
         default="RELEVANCE",
     )
     selection_weight: FloatProperty(
@@ -159,11 +153,7 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
     cost_mode: EnumProperty(
         name="Cost Model",
         description="How the heuristic turns an element's cost into predicted milliseconds",
-        items=(
-            ("PAPER", "Paper", "C = V * Q, scaled to milliseconds by a factor fitted to measured trace times", 0),
-            ("MEASURED", "Measured", "Predicted from the element's pixel count and the measured cost per ray of "
-                                     "its effects, times Q", 1),
-        ),
+        items=_enum_items(schema.COST_MODE_ITEMS),
         default="MEASURED",
     )
     shadow_map_size: IntProperty(

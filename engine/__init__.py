@@ -6,15 +6,9 @@ message, instead of a silently black image.
 """
 import bpy
 
+from ..phrt_addon.schema import PASSES
 from . import final
 
-PASSES = (
-    # name, channels, channel ids, type
-    ("Normal", 3, "XYZ", "VECTOR"),
-    ("PHRT Selected", 1, "X", "VALUE"),
-    ("PHRT Candidate", 1, "X", "VALUE"),
-    ("PHRT Element", 1, "X", "VALUE"),  # front element index + 1, 0 where none (popping, report)
-)
 
 
 class PHRTRenderEngine(bpy.types.RenderEngine):
@@ -64,8 +58,6 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
             self.update_stats("PHRT", f"Error: {error}")
 
     def update_render_passes(self, scene=None, renderlayer=None):
-        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
-        self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")
         for name, channels, chan_id, pass_type in PASSES:
             self.register_pass(scene, renderlayer, name, channels, chan_id, pass_type)
 

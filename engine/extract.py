@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import compat
-from ..phrt_addon import rules
+from ..phrt_addon import naming, rules
+from ..phrt_addon.metrics import srgb_to_linear
 from ..phrt_addon.scene import (Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings,
                                 geometry_key)
 
@@ -42,8 +43,12 @@ MESH_CACHE = MeshCache()
 TEXTURE_CACHE = {}
 
 
-def _srgb_to_linear(values):
-    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
+def instance_element_name(instance) -> str:
+    """The element name of a depsgraph object instance (without material): ``phrt_addon/naming.py``."""
+    if instance.is_instance:
+        parent = instance.parent.name if instance.parent else "?"
+        return naming.object_element(instance.object.name, parent, instance.persistent_id[0])
+    return naming.object_element(instance.object.name)
 
 
 def _read_mesh(mesh):
@@ -92,7 +97,7 @@ def _image_pixels(image, problems):
         image.pixels.foreach_get(pixels)
         pixels = pixels.reshape(height, width, 4)
         if not image.is_float and image.colorspace_settings.name.lower().startswith("srgb"):
-            pixels[..., :3] = _srgb_to_linear(pixels[..., :3])
+            pixels[..., :3] = srgb_to_linear(pixels[..., :3])
         pixels = rules.prepare_texture(pixels)  # what raster and tracer both sample
         TEXTURE_CACHE[key] = pixels
         return pixels, "/".join(map(str, key))
@@ -257,11 +262,7 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
                     warned_types.add(obj.type)
                     problems.append(f"Objects of type {obj.type} are not drawn by PHRT yet (e.g. '{obj.name}')")
                 continue
-            if instance.is_instance:
-                parent = instance.parent.name if instance.parent else "?"
-                name = f"{obj.name}@{parent}:{instance.persistent_id[0]}"
-            else:
-                name = obj.name
+            name = instance_element_name(instance)
             original = obj.original
             owned_mesh = obj.type != "MESH"
             mesh = obj.to_mesh() if owned_mesh else obj.data
@@ -279,7 +280,7 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
                 for slot_index, material in enumerate(slot_materials):
                     material_settings = _element_settings(material.original) if material is not None else None
                     if material_settings is not None and material_settings.candidate:
-                        index = element_for(f"{name}/{material.name}", original.name, material.name,
+                        index = element_for(naming.material_element(name, material.name), original.name, material.name,
                                             material_settings, True)
                         tri_element[slots == slot_index] = index
                 rest = tri_element < 0

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.problems import ProblemLog
+from ..phrt_addon.schema import PASS_FIELDS
 from . import extract, gpu_resources, raster
 
 _STANDALONE = {}  # scene name -> FrameRenderer when no replay session is active
@@ -129,15 +130,8 @@ class FinalRender:
         try:
             layer = render_result.layers[0]
             passes = result.passes
-            arrays = {
-                "Combined": passes.combined,
-                "Depth": passes.depth,
-                "Normal": passes.normal,
-                "PHRT Selected": passes.selected,
-                "PHRT Candidate": passes.candidate,
-                "PHRT Element": passes.element,
-            }
-            for name, array in arrays.items():
+            for name, field in PASS_FIELDS.items():
+                array = getattr(passes, field)
                 render_pass = layer.passes.find_by_name(name, "")
                 if render_pass is None or array is None:
                     continue

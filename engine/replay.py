@@ -34,11 +34,12 @@ import bpy
 
 from .. import compat
 from ..phrt_addon import runlog
+from ..phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from . import extract, final
 
 # Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
 # from the raster and raytrace runs it has just written beside the hybrid one (no calibration).
-MODES = ("RASTER", "RAYTRACE", "HYBRID")
+MODES = REPLAY_ORDER  # the order a replay of several modes runs them in
 IMAGE_FORMATS = ("exr", "png", "none")
 
 
@@ -417,8 +418,6 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
     return result
 
 
-EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
-                       "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
 
 
 def default_run_dir(out_root, scene_label, camera_name, mode) -> Path:

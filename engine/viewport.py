@@ -25,6 +25,7 @@ import types
 
 import numpy as np
 
+from ..phrt_addon import naming
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.scene import Camera
 from . import extract, final, gpu_resources
@@ -69,33 +70,6 @@ def overlay_colors(rows) -> dict:
     return colors
 
 
-def element_object_name(element: str, object_names) -> str | None:
-    """The object an element name belongs to: ``Obj``, ``Obj/Material`` or an instance
-    ``Obj@Parent:id`` (optionally ``/Material``).  ``object_names`` is a container of
-    the existing object names (exact names win over parsing)."""
-    if element in object_names:
-        return element
-    if "/" in element:
-        head = element.rsplit("/", 1)[0]
-        if head in object_names:
-            return head
-        element = head
-    if "@" in element:
-        head = element.split("@", 1)[0]
-        if head in object_names:
-            return head
-    return None
-
-
-def instance_element_name(instance) -> str:
-    """The element name ``extract`` gives a depsgraph object instance (without material)."""
-    obj = instance.object
-    if instance.is_instance:
-        parent = instance.parent.name if instance.parent else "?"
-        return f"{obj.name}@{parent}:{instance.persistent_id[0]}"
-    return obj.name
-
-
 def overlay_boxes(depsgraph, colors) -> list:
     """``[(rgba, corners (8, 3) world space)]``: the bounding box of every drawn
     object or instance whose element (or one of its material elements) has a colour.
@@ -104,14 +78,15 @@ def overlay_boxes(depsgraph, colors) -> list:
         return []
     material_colors = {}  # element base name -> colours of its material elements
     for element, color in colors.items():
-        if "/" in element:
-            material_colors.setdefault(element.rsplit("/", 1)[0], []).append(color)
+        base = naming.base_element(element)
+        if base is not None:
+            material_colors.setdefault(base, []).append(color)
     boxes = []
     for instance in depsgraph.object_instances:
         obj = instance.object
         if obj.type not in extract.MESH_CONVERTIBLE:
             continue
-        base = instance_element_name(instance)
+        base = extract.instance_element_name(instance)
         entries = [(1.0, colors[base])] if base in colors else []
         entries += [(1.04, color) for color in material_colors.get(base, ())]
         if not entries:

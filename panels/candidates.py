@@ -17,7 +17,7 @@ import bpy
 from bpy.props import BoolProperty, CollectionProperty, FloatProperty, IntProperty, StringProperty
 
 from ..engine import extract, final
-from ..engine.viewport import element_object_name
+from ..phrt_addon import naming
 
 # What the list says about an element's last decision: reason -> (text, icon).
 DECISIONS = {
@@ -75,7 +75,7 @@ def candidate_entries(scene, rows) -> list:
             if material is not None and material.phrt.candidate and material not in tagged:
                 tagged.append(material)
         for material in tagged:
-            name = f"{obj.name}/{material.name}"
+            name = naming.material_element(obj.name, material.name)
             entries[name] = _settings_entry(name, obj.name, material.name, material.phrt, True)
         if not materials or any(m is None or not m.phrt.candidate for m in materials):
             entries[obj.name] = _settings_entry(obj.name, obj.name, "", obj.phrt, obj.phrt.candidate)
@@ -84,7 +84,7 @@ def candidate_entries(scene, rows) -> list:
         name = str(row["element"])
         entry = entries.get(name)
         if entry is None:
-            object_name = element_object_name(name, objects)
+            object_name = naming.element_object_name(name, objects)
             if object_name is None:
                 continue  # a frame of another file
             owner = objects[object_name].phrt

@@ -52,9 +52,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-EFFECTS = ("shadows", "reflections", "refractions")
+from .schema import COST_MODES, EFFECTS
+
 STAGES = ("raster", "select", "composite")
-COST_MODES = ("paper", "measured")
 
 # Priors, used only until the first measurement of each quantity.  Rough values
 # for a 640x480 frame on 2 CPU cores (see /work/shared/PLATFORM-NOTES.md).

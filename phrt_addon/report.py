@@ -52,9 +52,8 @@ from pathlib import Path
 import numpy as np
 
 from . import defaults, metrics, oracle, popping, runlog
+from .schema import MODE_TITLES, MODES
 
-MODES = ("RASTER", "HYBRID", "RAYTRACE")
-MODE_TITLES = {"RASTER": "Raster", "HYBRID": "Hybrid", "RAYTRACE": "Ray tracing"}
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
 WORST_ELEMENTS = 3
 # Frames measured at once (LDR-FLIP and EXR reading release the GIL).
