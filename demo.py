@@ -48,7 +48,7 @@ def _render_showcase(bpy, out: Path):
         render.use_file_extension = True
         render.filepath = str(out / "showcase")
         bpy.ops.render.render(write_still=True)
-        timings.append(dict(final.LAST_FRAME["stats"]))
+        timings.append(dict(final.last_frame().stats))
     stats = timings[-1]  # the warm frame
     return (f"showcase frame (640x480, hybrid, budget at {SHOWCASE_BUDGET_AT:g} = {stats['budget_ms']:.0f} ms, warm): "
             f"total {stats['total_ms']:.0f} ms = raster {stats['raster_ms']:.0f}"

@@ -7,7 +7,7 @@ message, instead of a silently black image.
 import bpy
 
 from ..phrt_addon.schema import PASSES
-from . import final
+from . import final, session
 
 
 
@@ -21,6 +21,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        self.session = session.current()  # what outlives this instance (caches, GPU objects, last frame)
         self.final = None
         self.viewport = None  # engine/viewport.ViewportRender, created by the first viewport callback
 

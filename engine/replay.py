@@ -174,7 +174,8 @@ class SteppedReplay:
         if budget_ms is None and fraction is not None and mode == "HYBRID":
             from . import budget as budget_module
             resolved = budget_module.resolve(
-                scene, camera, frame_range, fraction, resolution=resolution, scene_label=scene_label,
+                scene, camera, frame_range, fraction, runner=SteppedReplay, resolution=resolution,
+                scene_label=scene_label,
                 search_dirs=[Path(run_dir).parent] if budget_search_dirs is None else budget_search_dirs)
             budget_ms = resolved.budget_ms
             budget_source = resolved.as_summary()

@@ -10,7 +10,7 @@ orbiting a static scene costs a G-buffer and lighting pass; the image is rendere
 again only when the depsgraph or the view changed.
 
 The overlay (any shading mode): each element of the last final frame
-(``final.LAST_FRAME['rows']``) gets a coloured box by its decision -
+(``session.last_frame().rows``) gets a coloured box by its decision -
 ``overlay_colors(rows)`` is the tested data, ``draw_overlay`` the GPU drawing,
 which needs a window (never runs in background mode).
 
@@ -28,7 +28,7 @@ import numpy as np
 from ..phrt_addon import naming
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.scene import Camera
-from . import extract, final, gpu_resources
+from . import extract, final, session
 
 # What each decision looks like in the overlay (linear RGBA).  Elements that are
 # not candidates get no box: the overlay shows what the designer tagged.
@@ -116,7 +116,7 @@ def draw_overlay():
     space = context.space_data
     if space is None or space.type != "VIEW_3D" or not space.overlay.show_overlays:
         return
-    boxes = overlay_boxes(context.evaluated_depsgraph_get(), overlay_colors(final.LAST_FRAME["rows"]))
+    boxes = overlay_boxes(context.evaluated_depsgraph_get(), overlay_colors(session.last_frame().rows))
     if not boxes:
         return
     import gpu
@@ -135,23 +135,21 @@ def draw_overlay():
         gpu.state.blend_set("NONE")
 
 
-_OVERLAY_HANDLE = None
-
-
 def add_overlay_handler():
     """Install the overlay's draw handler (once; nothing to draw in background mode)."""
-    global _OVERLAY_HANDLE
     import bpy
-    if _OVERLAY_HANDLE is None and not bpy.app.background:
-        _OVERLAY_HANDLE = bpy.types.SpaceView3D.draw_handler_add(draw_overlay, (), "WINDOW", "POST_VIEW")
+    engine_session = session.current()
+    if engine_session.overlay_handle is None and not bpy.app.background:
+        engine_session.overlay_handle = bpy.types.SpaceView3D.draw_handler_add(draw_overlay, (), "WINDOW",
+                                                                               "POST_VIEW")
 
 
 def remove_overlay_handler():
-    global _OVERLAY_HANDLE
     import bpy
-    if _OVERLAY_HANDLE is not None:
-        bpy.types.SpaceView3D.draw_handler_remove(_OVERLAY_HANDLE, "WINDOW")
-        _OVERLAY_HANDLE = None
+    engine_session = session.current()
+    if engine_session.overlay_handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(engine_session.overlay_handle, "WINDOW")
+        engine_session.overlay_handle = None
 
 
 # -- Rendered shading ------------------------------------------------------------
@@ -194,7 +192,7 @@ def render_view(depsgraph, camera: Camera, renderer: FrameRenderer, read_back: b
     (``view_draw``, or ``render()`` of an engine with ``bl_use_gpu_context``).
     Returns the ``FrameResult``: ``passes.combined`` is the image read back ((h, w, 4), bottom
     row first), or None without ``read_back``; the GPU keeps it in the frame target "combined"
-    (``gpu_resources.RESOURCES.target``) until the next frame is drawn."""
+    (``the session's GPU resources' target``) until the next frame is drawn."""
     start = time.perf_counter()
     stand_in = _ViewCamera(camera.view_matrix, camera.projection, camera.ortho, camera.clip_start, camera.clip_end)
     snapshot = extract.extract(depsgraph, camera_override=stand_in)
@@ -219,7 +217,7 @@ class ViewportRender:
         self.renderer = FrameRenderer()
         self.stale = True
         self.view_key = None
-        self.image_frame = None  # RESOURCES.frames_drawn when this view's image was drawn
+        self.image_frame = None  # resources.frames_drawn when this view's image was drawn
         self.size = None
 
     def update(self, depsgraph):
@@ -236,7 +234,7 @@ class ViewportRender:
         view_matrix = np.array(region_3d.view_matrix, dtype=np.float64)
         window_matrix = np.array(region_3d.window_matrix, dtype=np.float64)
         key = (view_matrix.round(6).tobytes(), window_matrix.round(6).tobytes(), width, height)
-        resources = gpu_resources.RESOURCES
+        resources = session.current().resources
         if self.image_frame is not None and self.image_frame != resources.frames_drawn:
             self.stale = True  # another render drew into the frame targets since: draw ours again
         if self.stale or key != self.view_key:
@@ -256,7 +254,7 @@ class ViewportRender:
                                         f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
         # The frame's own GPU target is drawn: nothing is read back (textures are shared between
         # the render and the window's context).  No reference to it is kept here: GPU objects
-        # belong to RESOURCES alone, which frees them deliberately.
+        # belong to the session's resources alone, which frees them deliberately.
         texture = resources.target("combined", self.size) if self.image_frame is not None else None
         if texture is None:
             return
