@@ -7,7 +7,7 @@
 2. Builds the sample scenes if needed and runs a short sweep of the ``arcade``
    scene's ``path1`` (``phrt sweep``: raster, raytrace, then hybrid at 3 budgets
    between them in every selection variant, and the oracle), each run a
-   CONTRACT.md section 4 run directory under ``out/demo/``, and the report
+   docs/formats.md run directory under ``out/demo/``, and the report
    (section 5, with the error-time curve, Table II, regret and popping) in
    ``out/demo/report/``.
 

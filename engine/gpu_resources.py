@@ -1,6 +1,6 @@
 """The one owner of PHRT's GPU resources, kept across ``render()`` calls.
 
-GPU objects created in one ``render()`` are valid in later ones (PLATFORM-NOTES,
+GPU objects created in one ``render()`` are valid in later ones (docs/platform-notes.md,
 "GPU module in background mode"), so what a frame needs is created once and kept
 while it stays valid:
 

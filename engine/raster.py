@@ -16,7 +16,7 @@ context, even in background mode, where llvmpipe serves it on the CPU) or
    pass (ambient, reflections, transparency, traced reflections and refractions),
    and one read-back of the final image.
 
-Read-back follows PLATFORM-NOTES: a flat ``gpu.types.Buffer`` and a reshape.
+Read-back follows docs/platform-notes.md: a flat ``gpu.types.Buffer`` and a reshape.
 """
 from __future__ import annotations
 

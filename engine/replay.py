@@ -1,4 +1,4 @@
-"""Replaying a camera path: one RUN_DIR per mode (CONTRACT.md section 4).
+"""Replaying a camera path: one RUN_DIR per mode (docs/formats.md).
 
 Shared by the ``phrt.replay_path`` operator, the ``phrt`` command and the demo,
 so the same input gives the same files whichever way a designer starts it.

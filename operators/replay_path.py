@@ -1,5 +1,5 @@
 """``phrt.replay_path``: replay a camera path over a frame range in one or more modes,
-one RUN_DIR per mode (CONTRACT.md sections 3 and 4).
+one RUN_DIR per mode (docs/properties.md, docs/formats.md).
 
 Two ways to run, same files:
 

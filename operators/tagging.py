@@ -6,7 +6,7 @@ from bpy.props import EnumProperty
 from ..engine import candidate_list
 from ..properties import PHRT_ObjectSettings
 
-# The per-element fields of Object.phrt and Material.phrt (CONTRACT.md section 3).
+# The per-element fields of Object.phrt and Material.phrt (docs/properties.md).
 ELEMENT_FIELDS = tuple(PHRT_ObjectSettings.__annotations__)
 
 

@@ -11,7 +11,7 @@ Plain Python + numpy (no ``bpy``), one frame at a time:
    the cost-ordered list and the relevance order;
 3. node selection of section V.C within the time left T (:func:`select`), with
    the graph rebuilt every frame (V.D) and one explainable row per element
-   (:meth:`SelectionResult.rows`, the columns of CONTRACT.md section 4).
+   (:meth:`SelectionResult.rows`, the columns of docs/formats.md).
 
 An element is an object tagged ``candidate``, or the faces of one material slot
 whose material is tagged.  Non-candidates are passed too: they get rows (reason
@@ -123,7 +123,7 @@ from . import defaults
 from .schema import MODES, ORDERS, REASONS, RELEVANCES, SELECTION_COLUMNS  # noqa: F401 (re-exported)
 from .cost_model import MAX_PREDICTED_MS, CostModel, normalise_cost_mode
 
-# Contract columns of selection.csv (CONTRACT.md section 4), in order.
+# Contract columns of selection.csv (docs/formats.md), in order.
 # The smallest predicted cost an R-per-ms order divides by (a 0 ms node comes first).
 MIN_ORDER_MS = 1e-6
 

@@ -1,4 +1,4 @@
-"""The report of several runs of a camera path (``phrt report``, CONTRACT.md section 5).
+"""The report of several runs of a camera path (``phrt report``, docs/formats.md).
 
 :func:`build_report` reads RUN_DIRs (see :mod:`.runlog`) and writes into
 ``out_dir``:

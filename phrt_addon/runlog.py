@@ -1,6 +1,6 @@
 """Run logs: the files a replay writes into its RUN_DIR, and their readers.
 
-A RUN_DIR (CONTRACT.md section 4) holds
+A RUN_DIR (docs/formats.md) holds
 
 - ``frames.csv``: one row per frame (timings of each stage, the budget, counts);
 - ``selection.csv``: one row per (frame, element): the heuristic's inputs
