@@ -186,7 +186,7 @@ def module_state(root: Path = ROOT):
                 if isinstance(node, ast.AnnAssign) and node.value is not None else []
             value = getattr(node, "value", None)
             for target in targets:
-                if not isinstance(target, ast.Name) or target.id in allowed:
+                if not isinstance(target, ast.Name) or target.id in allowed or target.id == "__all__":
                     continue
                 constant = target.id.lstrip("_").isupper()
                 container = isinstance(value, (ast.List, ast.Set, ast.Dict, ast.ListComp, ast.SetComp,
