@@ -1,6 +1,6 @@
 """The one owner of PHRT's GPU resources, kept across ``render()`` calls.
 
-GPU objects created in one ``render()`` are valid in later ones (PLATFORM-NOTES,
+GPU objects created in one ``render()`` are valid in later ones (docs/platform-notes.md,
 "GPU module in background mode"), so what a frame needs is created once and kept
 while it stays valid:
 
@@ -25,7 +25,6 @@ nothing after its first frame and frees what it created.
 """
 from __future__ import annotations
 
-import atexit
 import hashlib
 from collections import Counter
 from dataclasses import dataclass
@@ -258,9 +257,3 @@ class GPUResources:
             self.created["target"] += len(targets)
         return targets
 
-
-RESOURCES = GPUResources()
-# GPU objects still referenced when the interpreter ends crash Blender's own teardown (exit status
-# 139 seen with bpy 5.0.1 when a shader outlived the process): drop them first.  atexit runs
-# handlers last-registered first, so this runs before anything bpy registered on import.
-atexit.register(RESOURCES.release)

@@ -16,7 +16,7 @@ context, even in background mode, where llvmpipe serves it on the CPU) or
    pass (ambient, reflections, transparency, traced reflections and refractions),
    and one read-back of the final image.
 
-Read-back follows PLATFORM-NOTES: a flat ``gpu.types.Buffer`` and a reshape.
+Read-back follows docs/platform-notes.md: a flat ``gpu.types.Buffer`` and a reshape.
 """
 from __future__ import annotations
 
@@ -30,7 +30,8 @@ from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
 from ..phrt_addon.scene import SceneSnapshot
 from ..phrt_addon.shadowmap import ShadowMap, light_views
 from . import shaders
-from .gpu_resources import RESOURCES, GPUResources, ShadowAtlas, gpu_module
+from . import session
+from .gpu_resources import GPUResources, ShadowAtlas, gpu_module
 
 # Material indices are stored +1 in the float position target's w: exact to 2^24.
 MAX_MATERIALS = (1 << 24) - 1
@@ -72,9 +73,9 @@ class GPUFrame:
     """The GPU work of one frame. ``draw()`` first; then the core calls ``gbuffer()`` if it
     traces and ``shade()`` once."""
 
-    def __init__(self, snapshot: SceneSnapshot, resources: GPUResources = RESOURCES):
+    def __init__(self, snapshot: SceneSnapshot, resources: GPUResources | None = None):
         self.snapshot = snapshot
-        self.resources = resources
+        self.resources = resources if resources is not None else session.current().resources
         self.width, self.height = snapshot.camera.width, snapshot.camera.height
         self.materials = shading.MaterialTable(snapshot.materials)
         self.raster_ms = 0.0

@@ -1,4 +1,4 @@
-"""Replaying a camera path: one RUN_DIR per mode (CONTRACT.md section 4).
+"""Replaying a camera path: one RUN_DIR per mode (docs/formats.md).
 
 Shared by the ``phrt.replay_path`` operator, the ``phrt`` command and the demo,
 so the same input gives the same files whichever way a designer starts it.
@@ -36,11 +36,12 @@ import bpy
 
 from .. import compat
 from ..phrt_addon import runlog
+from ..phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from . import extract, final
 
 # Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
 # from the raster and raytrace runs it has just written beside the hybrid one (no calibration).
-MODES = ("RASTER", "RAYTRACE", "HYBRID")
+MODES = REPLAY_ORDER  # the order a replay of several modes runs them in
 IMAGE_FORMATS = ("exr", "png", "none")
 
 
@@ -175,7 +176,8 @@ class SteppedReplay:
         if budget_ms is None and fraction is not None and mode == "HYBRID":
             from . import budget as budget_module
             resolved = budget_module.resolve(
-                scene, camera, frame_range, fraction, resolution=resolution, scene_label=scene_label,
+                scene, camera, frame_range, fraction, runner=SteppedReplay, resolution=resolution,
+                scene_label=scene_label,
                 search_dirs=[Path(run_dir).parent] if budget_search_dirs is None else budget_search_dirs)
             budget_ms = resolved.budget_ms
             budget_source = resolved.as_summary()
@@ -424,8 +426,6 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
     return result
 
 
-EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
-                       "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
 
 
 class _CapturedStderr:

@@ -20,7 +20,7 @@ Two cost modes, both always learned so that a report can compare them:
     per effect), a global ``residual`` that absorbs what the per-effect split
     cannot explain (mixed effects, per-frame overhead), and the designer's Q.
 
-Q is a designer multiplier (CONTRACT.md section 3): with Q = 1 the prediction is
+Q is a designer multiplier (docs/properties.md): with Q = 1 the prediction is
 the time the model expects to measure; Q = 2 charges an element twice its
 expected time against the budget.  The learning itself never involves Q in the
 measured mode (rays and milliseconds are physical).
@@ -52,12 +52,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-EFFECTS = ("shadows", "reflections", "refractions")
+from .schema import COST_MODES, EFFECTS
+
 STAGES = ("raster", "select", "composite")
-COST_MODES = ("paper", "measured")
 
 # Priors, used only until the first measurement of each quantity.  Rough values
-# for a 640x480 frame on 2 CPU cores (see /work/shared/PLATFORM-NOTES.md).
+# for a 640x480 frame on 2 CPU cores (see docs/platform-notes.md).
 STAGE_PRIOR_MS = {"raster": 50.0, "select": 1.0, "composite": 5.0}
 MS_PER_RAY_PRIOR = {"shadows": 1.5e-4, "reflections": 3e-4, "refractions": 3e-4}
 # ms per unit of the paper's cost C (V normalised to 1 for the frame's most

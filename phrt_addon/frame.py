@@ -84,7 +84,6 @@ class FramePasses:
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
     element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
-    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Run logs: the files a replay writes into its RUN_DIR, and their readers.
 
-A RUN_DIR (CONTRACT.md section 4) holds
+A RUN_DIR (docs/formats.md) holds
 
 - ``frames.csv``: one row per frame (timings of each stage, the budget, counts);
 - ``selection.csv``: one row per (frame, element): the heuristic's inputs
@@ -33,28 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .schema import (BOOL_COLUMNS, FRAME_COLUMNS, FRAMES_CSV, FRAMES_DIR, REASONS,  # noqa: F401 (re-exported)
+                     SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, STRING_COLUMNS, SUMMARY_JSON)
+
 log = logging.getLogger(__name__)
 
-FRAMES_CSV = "frames.csv"
-SELECTION_CSV = "selection.csv"
-SUMMARY_JSON = "summary.json"
-FRAMES_DIR = "frames"
-
-FRAME_COLUMNS = (
-    "frame", "mode", "total_ms", "raster_ms", "select_ms", "trace_ms",
-    "composite_ms", "budget_ms", "predicted_trace_ms", "n_candidates",
-    "n_visible", "n_selected", "rays",
-)
-SELECTION_COLUMNS = (
-    "frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S", "R",
-    "selected", "reason",
-)
-STAGE_COLUMNS = ("raster_ms", "select_ms", "trace_ms", "composite_ms")
-# Why an element was not ray traced; empty when it was selected.
-REASONS = ("not_visible", "over_area", "over_budget", "not_candidate")
-
-_STRING_COLUMNS = frozenset({"mode", "element", "reason"})
-_BOOL_COLUMNS = frozenset({"visible", "selected"})
 # Keys of summary.json the caller must pass to close() (the rest is computed).
 SUMMARY_REQUIRED_KEYS = ("scene", "path", "resolution", "blender_version", "embreex_version")
 SIGNIFICANT_DIGITS = 6
@@ -402,11 +385,11 @@ def machine_info():
 
 
 def _parse_cell(column, text):
-    if column in _STRING_COLUMNS:
+    if column in STRING_COLUMNS:
         return text
     if text == "":
         return None
-    if column in _BOOL_COLUMNS:
+    if column in BOOL_COLUMNS:
         return text not in ("0", "False", "false")
     try:
         return int(text)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import rules
+from . import defaults, rules, schema
 
 LIGHT_KINDS = ("POINT", "SUN", "SPOT", "AREA")
 
@@ -184,13 +184,13 @@ class Camera:
 class Settings:
     """Scene.phrt, copied into the snapshot."""
 
-    mode: str = "HYBRID"
-    budget_ms: float = 150.0
-    selection_weight: float = 0.5
-    max_area_fraction: float = 0.40
-    max_bounces: int = 4
+    mode: str = schema.HYBRID
+    budget_ms: float = defaults.BUDGET_MS
+    selection_weight: float = defaults.SELECTION_WEIGHT
+    max_area_fraction: float = defaults.MAX_AREA_FRACTION
+    max_bounces: int = defaults.MAX_BOUNCES
     cost_mode: str = "MEASURED"
-    shadow_map_size: int = 2048
+    shadow_map_size: int = defaults.SHADOW_MAP_SIZE
     budget_at: float | None = None  # set: the budget is this fraction of the way from raster to ray traced
     relevance: str = "PAPER"  # 'PAPER' (equation 3) or 'ERROR' (V x expected benefit, see heuristic.py)
     selection_order: str = "RELEVANCE"  # 'RELEVANCE' (the paper's) or 'RELEVANCE_PER_MS'

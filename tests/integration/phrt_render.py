@@ -22,11 +22,11 @@ MODES = ("RASTER", "HYBRID", "RAYTRACE")
 
 def assert_finite_logs():
     """No NaN or Inf in the last frame's statistics or selection rows."""
-    frame = final.LAST_FRAME
-    for key, value in frame["stats"].items():
+    frame = final.last_frame()
+    for key, value in frame.stats.items():
         if isinstance(value, float):
             assert math.isfinite(value), f"stats[{key}] = {value}"
-    for row in frame["rows"]:
+    for row in frame.rows:
         for key, value in row.items():
             if isinstance(value, float):
                 assert math.isfinite(value), f"selection row {row['element']}: {key} = {value}"
@@ -49,7 +49,7 @@ def render(scene, mode, name, tmp_path):
     for pass_name, pixels in passes.items():
         bad = ~np.isfinite(pixels)
         assert not np.any(bad), f"{name} {mode}: {bad.sum()} NaN/Inf values in pass {pass_name}"
-    assert final.LAST_FRAME["stats"]["mode"] == mode
+    assert final.last_frame().stats["mode"] == mode
     assert_finite_logs()
     keep = os.environ.get("PHRT_TEST_IMAGES")
     if keep:
@@ -69,7 +69,7 @@ def set_world(scene, color):
 
 
 def selected_elements():
-    return {row["element"] for row in final.LAST_FRAME["rows"] if row["selected"]}
+    return {row["element"] for row in final.last_frame().rows if row["selected"]}
 
 
 def camera_rays():

@@ -25,9 +25,9 @@ import time
 
 import numpy as np
 
-from . import shading
-from .scene import Camera, Material, MeshInstance, SceneSnapshot
-from .tracer import TraceScene
+from ..phrt_addon import shading
+from ..phrt_addon.scene import Camera, Material, MeshInstance, SceneSnapshot
+from ..phrt_addon.tracer import TraceScene
 
 WIDTH, HEIGHT = 640, 480
 REPEATS = 5
