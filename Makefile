@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast test-compat bench paper extension scenes clean
+.PHONY: demo test test-fast test-compat bench paper soak extension scenes clean
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -39,6 +39,13 @@ bench: $(STAMP)
 # SCHEDULER=tcp://HOST:8786` on an existing Dask cluster (docs/cluster.md).
 paper: $(STAMP)
 	$(PY) -m phrt.paper --out out/paper $(if $(WORKERS),--workers $(WORKERS)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+
+# Long runs kept out of `make test` (tools/soak.py): a 1000-frame HYBRID replay of arcade at
+# 320x240, budget 600 ms (RSS after frame 100 vs 1000 < 50 MB, GPU/Embree objects created ==
+# freed) and a 2-million-triangle mesh in the three modes. ~15 min on 2 cores; figures in
+# out/soak/soak.json.
+soak: $(STAMP)
+	$(PY) tools/soak.py --out out/soak
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes

@@ -172,16 +172,16 @@ def main(argv=None):
     parser.add_argument("--gpu-frames", default="200-259")
     parser.add_argument("--skip-gpu-frame", action="store_true")
     args = parser.parse_args(argv)
-    from .phrt_addon import selection_bench
-    print("Selection heuristic (phrt_addon/selection_bench.py)")
-    selection_bench.run()
+    from .benchmarks import selection
+    print("Selection heuristic (benchmarks/selection.py)")
+    selection.run()
     try:
-        from .phrt_addon import trace_bench
+        from .benchmarks import trace
     except ImportError:
-        trace_bench = None
-    if trace_bench is not None:
-        print("\nTrace stage vs raw embreex (phrt_addon/trace_bench.py)")
-        trace_bench.run()
+        trace = None
+    if trace is not None:
+        print("\nTrace stage vs raw embreex (benchmarks/trace.py)")
+        trace.run()
     if not args.skip_replay:
         replay_bench(args.scene, args.frames)
     if not args.skip_gpu_frame:

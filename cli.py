@@ -17,19 +17,19 @@ checked before anything is written.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
-import os
+import signal
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent
-SAMPLE_DIR = ROOT / "sample_scenes"
-
-
-class UserError(Exception):
-    """Bad input: printed as one line, exit status 2."""
+# Starting Blender and opening scenes (blender_process.py), under the names demo.py, bench.py and
+# tools/soak.py use.
+from .blender_process import SAMPLE_DIR, UserError, load_scene
+from .blender_process import blender as _blender
+from .blender_process import import_blender as _import_blender
+from .blender_process import quiet_exit as _quiet_exit
+from .blender_process import quiet_stdout as _quiet_stdout
 
 
 class _Parser(argparse.ArgumentParser):
@@ -149,89 +149,6 @@ def _progress(stream):
     return show
 
 
-@contextlib.contextmanager
-def _quiet_stdout():
-    """Blender prints 'Saved: ...' per frame on stdout; keep stdout for our summary lines."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)
-    try:
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(devnull)
-        os.close(saved)
-
-
-def _import_blender():
-    """Start Blender (import bpy) without its start-up log: Blender 5.x prints
-    'color_management | Using OCIO=...' on stdout when the OCIO variable is set (5.2 sets
-    it for its child processes).  Not on stderr either, where bad input gets one line."""
-    if "bpy" not in sys.modules:
-        with _quiet_stdout():
-            import bpy  # noqa: F401
-
-
-def _blender():
-    """Import bpy and register the add-on from this package (idempotent)."""
-    import bpy
-    from . import register
-    if not hasattr(bpy.types.Scene, "phrt"):
-        register()
-    return bpy
-
-
-def _sample_is_stale(blend_path):
-    """A sample .blend is rebuilt when missing, older than any of its generator's modules
-    or saved by another Blender version."""
-    if not blend_path.exists():
-        return True
-    built = blend_path.stat().st_mtime
-    if any(module.stat().st_mtime > built for module in SAMPLE_DIR.glob("*.py")):
-        return True
-    import bpy
-    from . import compat
-    return compat.blend_file_version(blend_path) != tuple(bpy.app.version[:2])
-
-
-def load_scene(name_or_path):
-    """Open a .blend file or a sample scene by name (built on first use); returns the scene's label."""
-    from .sample_scenes import generate
-    path = Path(name_or_path)
-    if path.suffix.lower() != ".blend" and name_or_path in generate.SCENES:
-        path = SAMPLE_DIR / f"{name_or_path}.blend"
-        bpy = _blender()
-        if _sample_is_stale(path):
-            with _quiet_stdout():
-                generate.write_scene(name_or_path, SAMPLE_DIR)
-        with _quiet_stdout():
-            bpy.ops.wm.open_mainfile(filepath=str(path))
-        return name_or_path
-    if not path.exists():
-        raise UserError(f"no such file or sample scene '{name_or_path}': give a .blend file or one of "
-                        f"{', '.join(generate.SCENES)}")
-    if path.is_dir() or path.suffix.lower() != ".blend":
-        raise UserError(f"'{name_or_path}' is not a .blend file")
-    with open(path, "rb") as handle:
-        magic = handle.read(7)
-    if magic not in (b"BLENDER",) and not magic.startswith(b"\x1f\x8b") and not magic.startswith(b"\x28\xb5\x2f\xfd"):
-        raise UserError(f"'{name_or_path}' is not a valid .blend file (bad header)")
-    bpy = _blender()
-    from . import compat
-    saved_by = compat.blend_file_version(path)
-    if saved_by is not None and saved_by > tuple(bpy.app.version[:2]):
-        print(f"phrt: warning: '{name_or_path}' was saved by Blender {saved_by[0]}.{saved_by[1]}, newer than this "
-              f"Blender {bpy.app.version_string}: expect loss of data (save it from this version)", file=sys.stderr)
-    try:
-        with _quiet_stdout():
-            bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
-    except RuntimeError as error:
-        raise UserError(f"cannot open '{name_or_path}': {str(error).strip().splitlines()[-1]}") from None
-    return path.stem
-
-
 def command_scenes(args):
     _check_output_dir(args.out)
     _blender()
@@ -282,6 +199,12 @@ def command_render(args):
                                           on_progress=progress, budget_at=args.budget_at)
     except replay_module.ReplayError as error:
         raise UserError(str(error)) from None
+    for line in result.problems:  # each problem of the scene once, with its count
+        print(f"phrt: warning: {line}", file=sys.stderr)
+    if result.signal:
+        print(f"phrt: interrupted by {result.signal}: {result.frames_done} of {frame_range[1] - frame_range[0] + 1} "
+              f"frames written to {out} (summary.json says partial)", file=sys.stderr)
+        return 128 + int(getattr(signal, result.signal))
     summary = result.summary or {}
     total = summary.get("total_ms", {})
     source = summary.get("budget_source")
@@ -308,15 +231,6 @@ def command_report(args):
         raise UserError(str(error).splitlines()[0]) from None
     print(f"phrt: report {files.markdown} and {files.html}")
     return 0
-
-
-def _quiet_exit():
-    """Nothing Blender prints on stdout while the process ends reaches it: 4.5 and 5.0
-    report 'Not freed memory blocks' there after opening a file saved by a newer Blender."""
-    sys.stdout.flush()
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)
-    os.close(devnull)
 
 
 def _budget_fractions(args):

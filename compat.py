@@ -99,6 +99,14 @@ def new_fcurve(channelbag, data_path, index, group_name):
 _BLEND_HEADER = re.compile(rb"BLENDER(?:[-_][vV](\d{3})|\d\d-\d\d[vV](\d{4}))")
 
 
+def new_grease_pencil(name):
+    """A new grease pencil datablock an object can use: Blender 4.5 keeps the legacy one in
+    ``bpy.data.grease_pencils`` (not valid for new objects) and the new one in
+    ``grease_pencils_v3``; from 5.0 ``grease_pencils`` is the new one."""
+    import bpy
+    return getattr(bpy.data, "grease_pencils_v3", bpy.data.grease_pencils).new(name)
+
+
 def blend_file_version(path):
     """(major, minor) of the Blender that saved the .blend file ``path``, read from its
     header (plain, gzip or zstd compressed), or None when the header is not a .blend's.

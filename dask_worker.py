@@ -51,12 +51,12 @@ class BlenderWorker(WorkerPlugin):
             sys.path[:] = [entry for entry in sys.path if not _BLENDER_SCRIPTS.search(entry)]
         sys.stdout.flush()
         os.dup2(2, 1)
-        from . import cli
-        cli._import_blender()
-        bpy = cli._blender()
-        with cli._quiet_stdout():
+        from . import blender_process
+        blender_process.import_blender()
+        bpy = blender_process.blender()
+        with blender_process.quiet_stdout():
             _main_thread_gpu_context(bpy)
-        atexit.register(cli._quiet_exit)  # Blender's "Not freed memory blocks" (4.5) at exit
+        atexit.register(blender_process.quiet_exit)  # Blender's "Not freed memory blocks" (4.5) at exit
 
 
 def _main_thread_gpu_context(bpy):

@@ -7,7 +7,7 @@
 2. Builds the sample scenes if needed and runs a short sweep of the ``arcade``
    scene's ``path1`` (``phrt sweep``: raster, raytrace, then hybrid at 3 budgets
    between them in every selection variant, and the oracle), each run a
-   CONTRACT.md section 4 run directory under ``out/demo/``, and the report
+   docs/formats.md run directory under ``out/demo/``, and the report
    (section 5, with the error-time curve, Table II, regret and popping) in
    ``out/demo/report/``.
 
@@ -48,7 +48,7 @@ def _render_showcase(bpy, out: Path):
         render.use_file_extension = True
         render.filepath = str(out / "showcase")
         bpy.ops.render.render(write_still=True)
-        timings.append(dict(final.LAST_FRAME["stats"]))
+        timings.append(dict(final.last_frame().stats))
     stats = timings[-1]  # the warm frame
     return (f"showcase frame (640x480, hybrid, budget at {SHOWCASE_BUDGET_AT:g} = {stats['budget_ms']:.0f} ms, warm): "
             f"total {stats['total_ms']:.0f} ms = raster {stats['raster_ms']:.0f}"

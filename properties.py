@@ -1,13 +1,34 @@
-"""Blender properties of PHRT: what designers tag on objects and materials, and
-the scene-wide settings of the hybrid renderer (CONTRACT.md section 3).
+"""Every Blender property of PHRT (docs/properties.md): what designers tag on objects and
+materials (``Object.phrt``, ``Material.phrt``), the scene-wide settings of the hybrid
+renderer (``Scene.phrt``), the Replay panel's settings (``Scene.phrt_replay``) and the
+UI's own state (``WindowManager.phrt_candidates``, ``phrt_candidate_index``,
+``phrt_overlay``), with the enum items the operators share.
 
-Each PropertyGroup attaches itself in its ``register()`` classmethod and
-detaches in ``unregister()``.
+Each PropertyGroup attaches itself in its ``register()`` classmethod and detaches in
+``unregister()``.  Imports only downward: the core and ``engine/``.
 """
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, IntProperty,
+                       PointerProperty, StringProperty)
 
-from .phrt_addon import defaults
+from .engine import candidate_list
+from .phrt_addon import defaults, schema
+
+# '//' (relative to the .blend file) must be declared from Blender 4.5 (the oldest supported) on.
+BLEND_RELATIVE_PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"}
+# The modes a replay renders (a set: ENUM_FLAG items are powers of two).
+MODE_FLAG_ITEMS = tuple((identifier, name, description, 1 << index)
+                        for index, (identifier, name, description) in enumerate(schema.MODE_ITEMS))
+IMAGE_ITEMS = (
+    ("EXR", "OpenEXR", "Multilayer EXR with every PHRT pass (needed by 'phrt report' error metrics)", 0),
+    ("PNG", "PNG", "8-bit sRGB PNG of the combined image", 1),
+    ("NONE", "None", "Logs only, no images", 2),
+)
+
+
+def _enum_items(items):
+    """EnumProperty items with explicit indices from a ``schema`` table (identifier, name, description)."""
+    return tuple((identifier, name, description, index) for index, (identifier, name, description) in enumerate(items))
 
 
 def _refresh_candidate_list(self, context):
@@ -17,8 +38,7 @@ def _refresh_candidate_list(self, context):
         return
     window_manager, scene = getattr(context, "window_manager", None), getattr(context, "scene", None)
     if window_manager is not None and scene is not None:
-        from .panels import candidates
-        candidates.refresh(window_manager, scene)
+        candidate_list.refresh(window_manager, scene)
 
 
 def _element_fields(owner):
@@ -93,11 +113,7 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
     mode: EnumProperty(
         name="Mode",
         description="How PHRT renders the frame",
-        items=(
-            ("RASTER", "Raster", "Raster only: G-buffer, shadow maps and blending; no ray tracing at all", 0),
-            ("HYBRID", "Hybrid", "Raster plus ray tracing of the elements the heuristic selects within the budget", 1),
-            ("RAYTRACE", "Ray Trace", "Ray trace every visible candidate with no budget: the reference image", 2),
-        ),
+        items=_enum_items(schema.MODE_ITEMS),
         default="HYBRID",
     )
     budget_ms: FloatProperty(
@@ -122,20 +138,13 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
         name="Relevance",
         description="What the heuristic's relevance R weighs: the paper's visibility, or visibility times "
                     "how much tracing the element changes its pixels",
-        items=(
-            ("PAPER", "Paper", "R = (S * I + V) * K, the paper's equation (3)", 0),
-            ("ERROR", "Error-Aware", "V weighted by a running estimate of the element's traced-vs-raster "
-                                     "difference per pixel (a prior from its material before it is traced)", 1),
-        ),
+        items=_enum_items(schema.RELEVANCE_ITEMS),
         default="PAPER",
     )
     selection_order: EnumProperty(
         name="Greedy Order",
         description="Order in which the selection pass takes elements that fit the time left",
-        items=(
-            ("RELEVANCE", "Relevance", "The paper's: the most relevant element first", 0),
-            ("RELEVANCE_PER_MS", "Relevance per ms", "Relevance divided by the predicted milliseconds first", 1),
-        ),
+        items=_enum_items(schema.ORDER_ITEMS),
         default="RELEVANCE",
     )
     selection_weight: FloatProperty(
@@ -151,17 +160,15 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
     )
     max_bounces: IntProperty(
         name="Max Bounces",
-        description="Maximum depth of reflection and refraction rays",
-        default=defaults.MAX_BOUNCES, min=0, max=16,
+        description="Reflection and refraction rays traced one after another from a ray traced surface: "
+                    "0 traces none (the raster look, traced shadows only), 1 one bounce (a mirror shows what "
+                    "it faces, glass bends once and light then goes straight on), and so on",
+        default=defaults.MAX_BOUNCES, min=0, max=64, soft_max=16,
     )
     cost_mode: EnumProperty(
         name="Cost Model",
         description="How the heuristic turns an element's cost into predicted milliseconds",
-        items=(
-            ("PAPER", "Paper", "C = V * Q, scaled to milliseconds by a factor fitted to measured trace times", 0),
-            ("MEASURED", "Measured", "Predicted from the element's pixel count and the measured cost per ray of "
-                                     "its effects, times Q", 1),
-        ),
+        items=_enum_items(schema.COST_MODE_ITEMS),
         default="MEASURED",
     )
     shadow_map_size: IntProperty(
@@ -179,14 +186,73 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
         del bpy.types.Scene.phrt
 
 
-CLASSES = (PHRT_ObjectSettings, PHRT_MaterialSettings, PHRT_SceneSettings)
+class PHRT_ReplaySettings(bpy.types.PropertyGroup):
+    """What the Replay panel passes to phrt.replay_path (saved with the scene)."""
+
+    camera: PointerProperty(
+        name="Camera Path", type=bpy.types.Object, poll=lambda self, obj: obj.type == "CAMERA",
+        description="The animated camera to replay; empty: the scene's first path")
+    use_path_range: BoolProperty(
+        name="Whole Path", default=True,
+        description="Replay the camera's whole animation (its keyframe range); off: the frames below")
+    frame_start: IntProperty(name="Start", default=1, min=0, description="First frame to render")
+    frame_end: IntProperty(name="End", default=250, min=0, description="Last frame to render")
+    modes: EnumProperty(name="Modes", items=MODE_FLAG_ITEMS, options={"ENUM_FLAG"}, default={"HYBRID"},
+                        description="Render the path once in each chosen mode, each into its own run folder")
+    output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//phrt_runs", options=BLEND_RELATIVE_PATH,
+                               description="Run folders <scene>-<path>-<mode> are written here "
+                                           "('//' is the .blend file's folder)")
+    images: EnumProperty(name="Images", items=IMAGE_ITEMS, default="EXR",
+                         description="Image format of the rendered frames")
+
+
+class PHRT_CandidateItem(bpy.types.PropertyGroup):
+    """One element of the candidate list (a copy: edit the object's or material's settings)."""
+
+    object_name: StringProperty(name="Object", description="The object this element belongs to")
+    material_name: StringProperty(name="Material", description="The tagged material, for a material element")
+    candidate: BoolProperty(name="Candidate", description="Tagged as a ray tracing candidate")
+    priority: FloatProperty(name="Priority (K)", description="The paper's K at the last refresh")
+    effects: StringProperty(name="Effects", description="Ray traced effects: Shd shadows, Rfl reflections, "
+                                                        "Rfr refractions")
+    rendered: BoolProperty(name="Rendered", description="The last rendered frame has a row for this element")
+    visible: BoolProperty(name="Visible", description="Visible in the last rendered frame")
+    visibility: FloatProperty(name="Visibility (V)", description="The paper's V in the last rendered frame")
+    cost: FloatProperty(name="Cost (C)", description="The paper's C in the last rendered frame")
+    relevance: FloatProperty(name="Relevance (R)", description="The paper's R in the last rendered frame "
+                                                               "(-1 when not rendered)")
+    selected: BoolProperty(name="Ray Traced", description="Ray traced in the last rendered frame")
+    reason: StringProperty(name="Reason", description="Why it was not ray traced: not_visible, over_area, "
+                                                      "over_budget or not_candidate")
+
+
+def _redraw_3d_views(window_manager, context):
+    for area in context.screen.areas if context.screen else ():
+        if area.type == "VIEW_3D":
+            area.tag_redraw()
+
+
+CLASSES = (PHRT_ObjectSettings, PHRT_MaterialSettings, PHRT_SceneSettings, PHRT_ReplaySettings, PHRT_CandidateItem)
 
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    bpy.types.Scene.phrt_replay = PointerProperty(type=PHRT_ReplaySettings, name="PHRT Replay",
+                                                  description="Settings of the Replay panel")
+    bpy.types.WindowManager.phrt_candidates = CollectionProperty(type=PHRT_CandidateItem)
+    bpy.types.WindowManager.phrt_candidate_index = IntProperty(
+        name="Active Element", default=-1, update=candidate_list.select_element,
+        description="Clicking an element selects its object")
+    bpy.types.WindowManager.phrt_overlay = BoolProperty(
+        name="Decision Overlay", default=False, update=_redraw_3d_views,
+        description="Box every candidate in the 3D view, coloured by the last rendered frame's decision")
 
 
 def unregister():
+    del bpy.types.WindowManager.phrt_overlay
+    del bpy.types.WindowManager.phrt_candidate_index
+    del bpy.types.WindowManager.phrt_candidates
+    del bpy.types.Scene.phrt_replay
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

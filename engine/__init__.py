@@ -6,15 +6,9 @@ message, instead of a silently black image.
 """
 import bpy
 
-from . import final
+from ..phrt_addon.schema import PASSES
+from . import final, session
 
-PASSES = (
-    # name, channels, channel ids, type
-    ("Normal", 3, "XYZ", "VECTOR"),
-    ("PHRT Selected", 1, "X", "VALUE"),
-    ("PHRT Candidate", 1, "X", "VALUE"),
-    ("PHRT Element", 1, "X", "VALUE"),  # front element index + 1, 0 where none (popping, report)
-)
 
 
 class PHRTRenderEngine(bpy.types.RenderEngine):
@@ -27,6 +21,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        self.session = session.current()  # what outlives this instance (caches, GPU objects, last frame)
         self.final = None
         self.viewport = None  # engine/viewport.ViewportRender, created by the first viewport callback
 
@@ -64,8 +59,6 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
             self.update_stats("PHRT", f"Error: {error}")
 
     def update_render_passes(self, scene=None, renderlayer=None):
-        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
-        self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")
         for name, channels, chan_id, pass_type in PASSES:
             self.register_pass(scene, renderlayer, name, channels, chan_id, pass_type)
 

@@ -18,16 +18,16 @@ from . import extract
 CALIBRATION_FRAMES = 3
 
 
-def calibrate(scene, camera, frame_range, fraction, *, resolution=None, scene_label=None) -> budget.BudgetResolution:
-    """Render a few frames of each mode and resolve ``fraction`` from their steady means."""
-    from .replay import SteppedReplay
-
+def calibrate(scene, camera, frame_range, fraction, *, runner, resolution=None,
+              scene_label=None) -> budget.BudgetResolution:
+    """Render a few frames of each mode and resolve ``fraction`` from their steady means.
+    ``runner`` is ``replay.SteppedReplay`` (passed in: the replay resolves its budget here)."""
     frames = budget.calibration_frames(frame_range, CALIBRATION_FRAMES)
     means = {}
     with tempfile.TemporaryDirectory(prefix="phrt-calibration-") as folder:
         for mode in ("RASTER", "RAYTRACE"):
             run_dir = Path(folder) / mode.lower()
-            run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images="none", resolution=resolution,
+            run = runner(scene, camera, frame_range, mode, run_dir, images="none", resolution=resolution,
                                 scene_label=scene_label, frame_list=[frames[0], *frames])
             while run.remaining:
                 run.step()
@@ -38,7 +38,7 @@ def calibrate(scene, camera, frame_range, fraction, *, resolution=None, scene_la
                                    detail={"calibration_frames": frames, "warm_up_frames": 1})
 
 
-def resolve(scene, camera, frame_range, fraction, *, resolution=None, scene_label=None,
+def resolve(scene, camera, frame_range, fraction, *, runner, resolution=None, scene_label=None,
             search_dirs=()) -> budget.BudgetResolution:
     """From complete raster and raytrace runs of this path among ``search_dirs`` on this CPU, else
     by calibration."""
@@ -48,4 +48,5 @@ def resolve(scene, camera, frame_range, fraction, *, resolution=None, scene_labe
                                       runlog.machine_info()["cpu_model"])
     if runs is not None:
         return budget.from_runs(fraction, *runs)
-    return calibrate(scene, camera, frame_range, fraction, resolution=resolution, scene_label=scene_label)
+    return calibrate(scene, camera, frame_range, fraction, runner=runner, resolution=resolution,
+                     scene_label=scene_label)

@@ -2,7 +2,7 @@
 
 Meshes are read with ``foreach_get`` into numpy arrays (never per-vertex Python
 loops).  Triangulation, corner normals and UVs of an unchanged mesh are reused
-from ``MESH_CACHE`` (keyed by the evaluated mesh's name and a hash of its vertex
+from the session's mesh cache (``engine/session.py``, keyed by the evaluated mesh's name and a hash of its vertex
 positions), so a replay converts each static mesh once.
 
 A broken or unsupported object is reported in ``snapshot.problems`` and skipped
@@ -13,6 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from .. import compat
+from . import session
+from ..phrt_addon import naming, rules
+from ..phrt_addon.metrics import srgb_to_linear
 from ..phrt_addon.scene import (Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings,
                                 geometry_key)
 
@@ -21,28 +24,12 @@ MESH_CONVERTIBLE = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 DEFAULT_MATERIAL = "__phrt_default__"
 
 
-class MeshCache:
-    """Triangulated corner data per mesh content, reused across frames."""
-
-    def __init__(self, limit=4096):
-        self._entries = {}
-        self.limit = limit
-
-    def get(self, key):
-        return self._entries.get(key)
-
-    def put(self, key, value):
-        if len(self._entries) >= self.limit:
-            self._entries.pop(next(iter(self._entries)))
-        self._entries[key] = value
-
-
-MESH_CACHE = MeshCache()
-TEXTURE_CACHE = {}
-
-
-def _srgb_to_linear(values):
-    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
+def instance_element_name(instance) -> str:
+    """The element name of a depsgraph object instance (without material): ``phrt_addon/naming.py``."""
+    if instance.is_instance:
+        parent = instance.parent.name if instance.parent else "?"
+        return naming.object_element(instance.object.name, parent, instance.persistent_id[0])
+    return naming.object_element(instance.object.name)
 
 
 def _read_mesh(mesh):
@@ -53,7 +40,7 @@ def _read_mesh(mesh):
     mesh.vertices.foreach_get("co", positions)
     positions = positions.reshape(-1, 3)
     key = (mesh.name, n_vertices, len(mesh.polygons), len(mesh.loops), geometry_key(positions))
-    cached = MESH_CACHE.get(key)
+    cached = session.current().meshes.get(key)
     if cached is not None:
         return cached
     mesh.calc_loop_triangles()
@@ -71,9 +58,9 @@ def _read_mesh(mesh):
     if mesh.uv_layers.active is not None and len(mesh.loops):
         uv_all = np.empty(len(mesh.loops) * 2, np.float32)
         mesh.uv_layers.active.uv.foreach_get("vector", uv_all)
-        corner_uvs = uv_all.reshape(-1, 2)[loops]
+        corner_uvs = rules.texture_coordinates(uv_all.reshape(-1, 2)[loops], len(loops))
     value = (positions, triangles.reshape(-1, 3), np.ascontiguousarray(corner_normals), corner_uvs, slots)
-    MESH_CACHE.put(key, value)
+    session.current().meshes.put(key, value)
     return value
 
 
@@ -82,8 +69,9 @@ def _image_pixels(image, problems):
     try:
         width, height = image.size
         key = (image.name, width, height, image.colorspace_settings.name)
-        if key in TEXTURE_CACHE:
-            return TEXTURE_CACHE[key], "/".join(map(str, key))
+        textures = session.current().textures
+        if key in textures:
+            return textures.get(key), "/".join(map(str, key))
         if width == 0 or height == 0:
             problems.append(f"Image '{image.name}' has no pixels; its texture is ignored")
             return None, None
@@ -91,9 +79,9 @@ def _image_pixels(image, problems):
         image.pixels.foreach_get(pixels)
         pixels = pixels.reshape(height, width, 4)
         if not image.is_float and image.colorspace_settings.name.lower().startswith("srgb"):
-            pixels[..., :3] = _srgb_to_linear(pixels[..., :3])
-        pixels = np.nan_to_num(pixels, nan=0.0, posinf=1.0, neginf=0.0)
-        TEXTURE_CACHE[key] = pixels
+            pixels[..., :3] = srgb_to_linear(pixels[..., :3])
+        pixels = rules.prepare_texture(pixels)  # what raster and tracer both sample
+        textures.put(key, pixels)
         return pixels, "/".join(map(str, key))
     except Exception as error:  # a missing file or a broken image must not stop the frame
         problems.append(f"Image '{getattr(image, 'name', '?')}' could not be read ({error}); its texture is ignored")
@@ -256,11 +244,7 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
                     warned_types.add(obj.type)
                     problems.append(f"Objects of type {obj.type} are not drawn by PHRT yet (e.g. '{obj.name}')")
                 continue
-            if instance.is_instance:
-                parent = instance.parent.name if instance.parent else "?"
-                name = f"{obj.name}@{parent}:{instance.persistent_id[0]}"
-            else:
-                name = obj.name
+            name = instance_element_name(instance)
             original = obj.original
             owned_mesh = obj.type != "MESH"
             mesh = obj.to_mesh() if owned_mesh else obj.data
@@ -278,7 +262,7 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
                 for slot_index, material in enumerate(slot_materials):
                     material_settings = _element_settings(material.original) if material is not None else None
                     if material_settings is not None and material_settings.candidate:
-                        index = element_for(f"{name}/{material.name}", original.name, material.name,
+                        index = element_for(naming.material_element(name, material.name), original.name, material.name,
                                             material_settings, True)
                         tri_element[slots == slot_index] = index
                 rest = tri_element < 0

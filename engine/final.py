@@ -4,10 +4,11 @@ depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``raster``)
 -> selection, trace, composite (``phrt_addon.frame``) -> render result passes,
 and, when a replay session is active, the run logs.
 
-State that must survive between frames lives outside the engine instance, in a
-``ReplaySession`` (one per replay: frame renderer with its Embree scenes, cost
-model and last selection, plus the run log), so a replay made of separate
-``render.render()`` calls and an animation render behave the same.
+State that must survive between frames lives outside the engine instance, in the
+engine's session (``engine/session.py``) and, during a replay, in a ``ReplaySession``
+(one per replay: frame renderer with its Embree scenes, cost model and last
+selection), so a replay made of separate ``render.render()`` calls and an animation
+render behave the same.
 """
 from __future__ import annotations
 
@@ -18,10 +19,10 @@ import traceback
 import numpy as np
 
 from ..phrt_addon.frame import FrameRenderer
-from . import extract, gpu_resources, raster
-
-_STANDALONE = {}  # scene name -> FrameRenderer when no replay session is active
-ACTIVE_SESSION = None
+from ..phrt_addon.problems import ProblemLog
+from ..phrt_addon.schema import PASS_FIELDS
+from . import extract, raster, session
+from .session import last_frame  # noqa: F401 (the UI's accessor, re-exported for scripts and tests)
 
 
 def log_exception(error):
@@ -29,17 +30,8 @@ def log_exception(error):
 
 
 def release_caches():
-    """Forget every cache (unregister, tests)."""
-    global ACTIVE_SESSION
-    for renderer in _STANDALONE.values():
-        renderer.close()
-    _STANDALONE.clear()
-    gpu_resources.RESOURCES.release()
-    extract.MESH_CACHE._entries.clear()
-    extract.TEXTURE_CACHE.clear()
-    if ACTIVE_SESSION is not None:
-        ACTIVE_SESSION.renderer.close()
-    ACTIVE_SESSION = None
+    """Forget every cache (file load, unregister, tests): ``session.release()``."""
+    session.release()
 
 
 class ReplaySession:
@@ -53,21 +45,21 @@ class ReplaySession:
         self.last_result = None
 
     def __enter__(self):
-        global ACTIVE_SESSION
-        ACTIVE_SESSION = self
+        session.current().replay = self
         return self
 
     def __exit__(self, *exc):
-        global ACTIVE_SESSION
-        ACTIVE_SESSION = None
+        engine_session = session.current()
+        engine_session.replay = None
         self.renderer.close()
         # End of the replay: its GPU resources (meshes, shadow maps, targets) are dropped here.
-        gpu_resources.RESOURCES.release(keep_shaders=True)
+        engine_session.resources.release(keep_shaders=True)
         return False
 
 
-# The last frame's decisions and problems, for the N panel and the viewport overlay.
-LAST_FRAME = {"rows": [], "problems": [], "stats": {}}
+def active_replay():
+    """The ``ReplaySession`` of the replay being rendered, or None."""
+    return session.current().replay
 
 
 def rasterize(snapshot):
@@ -81,24 +73,23 @@ def rasterize(snapshot):
 class FinalRender:
     def __init__(self, engine):
         self.engine = engine
+        self.problems = ProblemLog()  # one engine instance renders all frames of an animation
 
     def render(self, depsgraph):
         engine = self.engine
         scene = depsgraph.scene_eval
-        session = ACTIVE_SESSION
+        engine_session = session.current()
+        replay = engine_session.replay
         start = time.perf_counter()
-        snapshot = extract.extract(depsgraph, camera_override=session.camera if session else None,
-                                   settings_override=session.settings_override if session else None)
-        for problem in snapshot.problems:
+        snapshot = extract.extract(depsgraph, camera_override=replay.camera if replay else None,
+                                   settings_override=replay.settings_override if replay else None)
+        # Each problem is told once per replay or animation render, not on every frame.
+        problem_log = replay.renderer.problems if replay is not None else self.problems
+        for problem in problem_log.report(snapshot.problems, snapshot.frame):
             engine.report({"WARNING"}, f"PHRT: {problem}")
         extract_ms = (time.perf_counter() - start) * 1000.0
         width, height = snapshot.camera.width, snapshot.camera.height
-        if session is not None:
-            renderer = session.renderer
-        else:
-            renderer = _STANDALONE.get(scene.name)
-            if renderer is None:
-                renderer = _STANDALONE[scene.name] = FrameRenderer()
+        renderer = engine_session.renderer_for(scene.name)
 
         engine.update_stats("PHRT", "Raster")
         gpu_frame = rasterize(snapshot)
@@ -109,13 +100,12 @@ class FinalRender:
         result = renderer.render(snapshot, gpu_frame)
         result.stats["extract_ms"] = extract_ms
         self._write(result, width, height)
-        LAST_FRAME["rows"] = result.selection_rows
-        LAST_FRAME["problems"] = list(snapshot.problems)
-        LAST_FRAME["stats"] = dict(result.stats)
-        if session is not None:
-            session.last_result = result
-            if session.on_frame is not None:
-                session.on_frame(result, snapshot)
+        last = engine_session.last_frame
+        last.rows, last.problems, last.stats = result.selection_rows, list(snapshot.problems), dict(result.stats)
+        if replay is not None:
+            replay.last_result = result
+            if replay.on_frame is not None:
+                replay.on_frame(result, snapshot)
         engine.update_stats("PHRT", f"{result.stats['total_ms']:.0f} ms, "
                                     f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
 
@@ -125,15 +115,8 @@ class FinalRender:
         try:
             layer = render_result.layers[0]
             passes = result.passes
-            arrays = {
-                "Combined": passes.combined,
-                "Depth": passes.depth,
-                "Normal": passes.normal,
-                "PHRT Selected": passes.selected,
-                "PHRT Candidate": passes.candidate,
-                "PHRT Element": passes.element,
-            }
-            for name, array in arrays.items():
+            for name, field in PASS_FIELDS.items():
+                array = getattr(passes, field)
                 render_pass = layer.passes.find_by_name(name, "")
                 if render_pass is None or array is None:
                     continue

@@ -1,6 +1,6 @@
 """The one owner of PHRT's GPU resources, kept across ``render()`` calls.
 
-GPU objects created in one ``render()`` are valid in later ones (PLATFORM-NOTES,
+GPU objects created in one ``render()`` are valid in later ones (docs/platform-notes.md,
 "GPU module in background mode"), so what a frame needs is created once and kept
 while it stays valid:
 
@@ -25,18 +25,14 @@ nothing after its first frame and frees what it created.
 """
 from __future__ import annotations
 
-import atexit
 import hashlib
 from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..phrt_addon import rules
 from . import shaders
-
-# Largest texture side uploaded for a material (bigger images are point-downsampled).
-MAX_TEXTURE_SIZE = 2048
-
 
 def gpu_module():
     import gpu  # only inside render()/view_draw(): drawing is unavailable at module level in background mode
@@ -150,7 +146,7 @@ class GPUResources:
         if entry is None:
             gpu = gpu_module()
             corners = mesh.triangles.reshape(-1)
-            uvs = mesh.corner_uvs if mesh.corner_uvs is not None else np.zeros((len(corners), 2), np.float32)
+            uvs = rules.texture_coordinates(mesh.corner_uvs, len(corners))
             fmt = gpu.types.GPUVertFormat()
             fmt.attr_add(id="pos", comp_type="F32", len=3, fetch_mode="FLOAT")
             fmt.attr_add(id="nor", comp_type="F32", len=3, fetch_mode="FLOAT")
@@ -184,10 +180,7 @@ class GPUResources:
         texture = self._textures.get(key)
         if texture is None:
             gpu = gpu_module()
-            image = np.asarray(image, dtype=np.float32)
-            height, width = image.shape[:2]
-            step = max(1, int(np.ceil(max(height, width) / MAX_TEXTURE_SIZE)))
-            image = np.ascontiguousarray(image[::step, ::step, :4])
+            image = rules.prepare_texture(image)  # what the tracer samples too
             height, width = image.shape[:2]
             buffer = gpu.types.Buffer("FLOAT", width * height * 4, image.ravel())
             texture = self._textures[key] = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buffer)
@@ -264,9 +257,3 @@ class GPUResources:
             self.created["target"] += len(targets)
         return targets
 
-
-RESOURCES = GPUResources()
-# GPU objects still referenced when the interpreter ends crash Blender's own teardown (exit status
-# 139 seen with bpy 5.0.1 when a shader outlived the process): drop them first.  atexit runs
-# handlers last-registered first, so this runs before anything bpy registered on import.
-atexit.register(RESOURCES.release)

@@ -16,7 +16,7 @@ context, even in background mode, where llvmpipe serves it on the CPU) or
    pass (ambient, reflections, transparency, traced reflections and refractions),
    and one read-back of the final image.
 
-Read-back follows PLATFORM-NOTES: a flat ``gpu.types.Buffer`` and a reshape.
+Read-back follows docs/platform-notes.md: a flat ``gpu.types.Buffer`` and a reshape.
 """
 from __future__ import annotations
 
@@ -25,15 +25,16 @@ import time
 
 import numpy as np
 
-from ..phrt_addon import shading
+from ..phrt_addon import rules, shading
 from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
 from ..phrt_addon.scene import SceneSnapshot
 from ..phrt_addon.shadowmap import ShadowMap, light_views
 from . import shaders
-from .gpu_resources import RESOURCES, GPUResources, ShadowAtlas, gpu_module
+from . import session
+from .gpu_resources import GPUResources, ShadowAtlas, gpu_module
 
-# Element indices are stored +1 in a 32-bit target (0 = no element).
-MAX_ELEMENTS = 0xFFFFFFFF - 1
+# Material indices are stored +1 in the float position target's w: exact to 2^24.
+MAX_MATERIALS = (1 << 24) - 1
 
 
 def _matrix_list(matrix) -> list:
@@ -57,28 +58,24 @@ def _ubo(gpu, values):
 
 
 def shadow_key(light, snapshot, size) -> str:
-    """Identifies a light's shadow maps: the light's own parameters and every mesh's content
-    and placement (what the maps see)."""
+    """Identifies a light's shadow maps: the light's own parameters, which materials cast
+    shadows (rules.casts_shadow) and every mesh's content and placement (what the maps see)."""
     digest = hashlib.blake2b(digest_size=16)
     digest.update(repr((light.kind, tuple(light.position), tuple(light.direction), light.spot_size, size)).encode())
+    digest.update(bytes(rules.casts_shadow(material) for material in snapshot.materials))
     for mesh in snapshot.meshes:
         digest.update(mesh.geometry_key.encode())
         digest.update(np.asarray(mesh.matrix_world, np.float64).tobytes())
     return digest.hexdigest()
 
 
-def casts_raster_shadow(material) -> bool:
-    """Glass and water do not cast raster shadows."""
-    return material.transmission <= 0.5
-
-
 class GPUFrame:
     """The GPU work of one frame. ``draw()`` first; then the core calls ``gbuffer()`` if it
     traces and ``shade()`` once."""
 
-    def __init__(self, snapshot: SceneSnapshot, resources: GPUResources = RESOURCES):
+    def __init__(self, snapshot: SceneSnapshot, resources: GPUResources | None = None):
         self.snapshot = snapshot
-        self.resources = resources
+        self.resources = resources if resources is not None else session.current().resources
         self.width, self.height = snapshot.camera.width, snapshot.camera.height
         self.materials = shading.MaterialTable(snapshot.materials)
         self.raster_ms = 0.0
@@ -92,6 +89,12 @@ class GPUFrame:
     # -- protocol --------------------------------------------------------------
     def draw(self):
         """G-buffer, resolve and its read-back, shadow maps; sets raster_ms and setup_ms."""
+        if len(self.snapshot.elements) > rules.MAX_ELEMENTS:
+            raise ValueError(f"{len(self.snapshot.elements)} ray tracing elements: the G-buffer tells at most "
+                             f"{rules.MAX_ELEMENTS} apart; tag fewer objects or materials")
+        if len(self.snapshot.materials) > MAX_MATERIALS:
+            raise ValueError(f"{len(self.snapshot.materials)} materials: the G-buffer tells at most "
+                             f"{MAX_MATERIALS} apart")
         gpu = gpu_module()
         start = time.perf_counter()
         created_before = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
@@ -327,7 +330,7 @@ class GPUFrame:
                 for mesh, groups in self._draw_list:
                     shader.uniform_float("model", _matrix_list(_model_relative(mesh.matrix_world, view.origin)))
                     for material_index, _, batch in groups:
-                        if casts_raster_shadow(self.snapshot.materials[material_index]):
+                        if rules.casts_shadow(self.snapshot.materials[material_index]):
                             batch.draw(shader)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)

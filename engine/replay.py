@@ -1,4 +1,4 @@
-"""Replaying a camera path: one RUN_DIR per mode (CONTRACT.md section 4).
+"""Replaying a camera path: one RUN_DIR per mode (docs/formats.md).
 
 Shared by the ``phrt.replay_path`` operator, the ``phrt`` command and the demo,
 so the same input gives the same files whichever way a designer starts it.
@@ -9,10 +9,26 @@ Frames are rendered one ``render.render()`` call at a time, with the state a
 replay carries (Embree scenes uploaded once, cost model, last selection) held
 by a ``ReplaySession``; after each frame the image is written and the logs are
 flushed, so a cancelled replay leaves complete frames and logs only.
+
+Nothing half-written ever carries a final name: an image is written as
+``frames/.NNNN.partial.<ext>``, checked to be complete (``runlog.image_is_complete``:
+a full disk makes Blender's writers stop early without an error) and renamed;
+``summary.json`` is written to a temporary name and renamed.  Cancelled (Esc,
+``should_stop``), interrupted (SIGINT, SIGTERM: the frame being rendered is
+finished first) or failed (a full disk) runs still get a ``summary.json`` with
+``"partial": true`` (and ``"error"`` when they failed), if the disk takes it.
+A problem of the scene (an object skipped...) is warned about once per replay
+and listed with its count in ``summary.json`` (``problems``).
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
+import sys
+import tempfile
+import signal
+import threading
 import time
 from pathlib import Path
 
@@ -20,11 +36,12 @@ import bpy
 
 from .. import compat
 from ..phrt_addon import runlog
+from ..phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from . import extract, final
 
 # Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
 # from the raster and raytrace runs it has just written beside the hybrid one (no calibration).
-MODES = ("RASTER", "RAYTRACE", "HYBRID")
+MODES = REPLAY_ORDER  # the order a replay of several modes runs them in
 IMAGE_FORMATS = ("exr", "png", "none")
 
 
@@ -114,6 +131,8 @@ class ReplayResult:
     frames_done: int
     cancelled: bool
     summary: dict | None
+    signal: str | None = None  # "SIGINT" / "SIGTERM" when a signal stopped the replay
+    problems: list = dataclasses.field(default_factory=list)  # one line per distinct problem, with its count
 
 
 class ReplayInterrupted(ReplayError):
@@ -157,7 +176,8 @@ class SteppedReplay:
         if budget_ms is None and fraction is not None and mode == "HYBRID":
             from . import budget as budget_module
             resolved = budget_module.resolve(
-                scene, camera, frame_range, fraction, resolution=resolution, scene_label=scene_label,
+                scene, camera, frame_range, fraction, runner=SteppedReplay, resolution=resolution,
+                scene_label=scene_label,
                 search_dirs=[Path(run_dir).parent] if budget_search_dirs is None else budget_search_dirs)
             budget_ms = resolved.budget_ms
             budget_source = resolved.as_summary()
@@ -176,6 +196,9 @@ class SteppedReplay:
         self.done = 0
         self.settings = settings
         self.settings.mode = mode
+        # A budget given here holds for the whole replay; otherwise the scene's (possibly
+        # animated) budget is read at every frame.
+        self._budget_fixed = budget_ms is not None
         if budget_ms is not None:
             self.settings.budget_ms = float(budget_ms)
         render = scene.render
@@ -221,15 +244,21 @@ class SteppedReplay:
         scene, render, session = self.scene, self.scene.render, self.session
         try:
             scene.frame_set(frame)
-            render.filepath = str(self.frames_dir / f"{frame:04d}")
+            if not self._budget_fixed:
+                self.settings.budget_ms = _scene_budget_ms(scene, self.settings.budget_ms)
+            # Written under a temporary name, renamed once complete (see _commit_image).
+            render.filepath = str(self._partial_image(frame))
             begin = time.perf_counter()
-            bpy.ops.render.render(write_still=self.images != "none")
+            with _captured_stderr() as blender_said:
+                bpy.ops.render.render(write_still=self.images != "none")
             wall_ms = (time.perf_counter() - begin) * 1000.0
             result = session.last_result
             if result is None:  # a failed render raises RuntimeError: this one was stopped
-                for image in self.frames_dir.glob(f"{frame:04d}.*"):
-                    image.unlink()
+                self._drop_partial_images(frame)
                 raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
+            if self.images != "none":
+                self._commit_image(frame, blender_said)
+            blender_said.forward()
             row = {key: result.stats.get(key) for key in runlog.FRAME_COLUMNS}
             row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
@@ -237,11 +266,50 @@ class SteppedReplay:
             session.last_result = None
         except ReplayInterrupted:
             raise
-        except BaseException:
-            self._close(summary=None)
+        except OSError as error:  # a full disk or a file-size limit while writing the logs
+            error = ReplayError(f"cannot write the run in '{self.run_dir}': {error.strerror or error} "
+                                f"(is the disk full?); the {self.done} frames before frame {frame} are complete")
+            self._fail(error)
+            raise error from None
+        except BaseException as error:
+            self._fail(error)
             raise
         self.done += 1
         return result.stats
+
+    def _partial_image(self, frame) -> Path:
+        return self.frames_dir / f".{frame:04d}.partial"
+
+    def _drop_partial_images(self, frame):
+        for image in self.frames_dir.glob(f".{frame:04d}.partial*"):
+            image.unlink(missing_ok=True)
+
+    def _commit_image(self, frame, blender_said=None):
+        """Give the frame's image its name once it is complete; a writer that hit a full disk
+        leaves a file that ends early, with no error from Blender (or only a line on stderr, on
+        4.5): it is removed and reported in one line."""
+        extension = ".exr" if self.images == "exr" else ".png"
+        partial = self.frames_dir / f".{frame:04d}.partial{extension}"
+        if not runlog.image_is_complete(partial):
+            self._drop_partial_images(frame)
+            reason = blender_said.reason() if blender_said is not None else ""
+            raise ReplayError(f"frame {frame} could not be written completely to '{self.frames_dir}' (is the disk "
+                              f"full, or a file-size limit reached?{' Blender: ' + reason if reason else ''}); "
+                              f"the {self.done} frames before it are complete")
+        os.replace(partial, self.frames_dir / f"{frame:04d}{extension}")
+
+    def _fail(self, error):
+        """Close the run after an error: complete frames and rows stay, ``summary.json`` says
+        the run is partial (if the disk still takes it)."""
+        if not self._open:
+            return
+        self._drop_partial_images(self.frames[min(self.done, len(self.frames) - 1)])
+        summary = {**self._run_facts(), "cancelled": False, "partial": True,
+                   "error": str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__}
+        try:
+            self._close(summary=summary)
+        except OSError:
+            self._open = False
 
     def finish(self, cancelled=False, restore_scene=True) -> ReplayResult:
         """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
@@ -249,9 +317,19 @@ class SteppedReplay:
         if not self._open:
             raise ValueError("SteppedReplay: already finished")
         cancelled = bool(cancelled and self.remaining)
-        written = self._close(summary={**self._summary, "cancelled": cancelled}, restore_scene=restore_scene)
+        problems = self.problem_lines()
+        written = self._close(summary={**self._run_facts(), "cancelled": cancelled, "partial": bool(self.remaining)},
+                              restore_scene=restore_scene)
         return ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
-                                   cancelled=cancelled, summary=written)
+                            cancelled=cancelled, summary=written, problems=problems)
+
+    def problem_lines(self) -> list:
+        """Each problem of the run once, with the number of frames it came up on."""
+        return self.session.renderer.problems.lines(self.done)
+
+    def _run_facts(self) -> dict:
+        return {**self._summary, "frames_planned": self.total,
+                "problems": self.session.renderer.problems.summary()}
 
     def _close(self, summary, restore_scene=True):
         if not self._open:
@@ -259,10 +337,7 @@ class SteppedReplay:
         self._open = False
         written = None
         try:
-            if summary is not None:
-                written = self.log.close(summary)
-            else:
-                self.log.__exit__(None, None, None)  # keep the complete rows, no summary
+            written = self.log.close(summary)
         finally:
             self.session.__exit__(None, None, None)
             if restore_scene:
@@ -281,37 +356,117 @@ class SteppedReplay:
 
 
 
+def _scene_budget_ms(scene, default):
+    """The scene's frame budget at its current frame (it may be animated), or ``default``."""
+    props = getattr(scene, "phrt", None)
+    try:
+        value = float(props.budget_ms)
+    except (AttributeError, TypeError, ValueError):
+        return default
+    return value if value >= 0 else default
+
+
+@contextlib.contextmanager
+def stop_on_signals(received: list):
+    """SIGINT and SIGTERM stop a replay between frames (the frame being rendered is finished,
+    written and logged, then ``summary.json`` says the run is partial): their names are appended
+    to ``received``.  A second signal acts as usual.  Only in the main thread (signal handlers
+    live there); elsewhere this does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    previous = {}
+
+    def handler(signum, _frame):
+        received.append(signal.Signals(signum).name)
+        for number, default in defaults.items():
+            signal.signal(number, default)
+
+    for number in defaults:
+        previous[number] = signal.signal(number, handler)
+    try:
+        yield
+    finally:
+        for number, before in previous.items():
+            signal.signal(number, before)
+
+
 def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None, resolution=None,
            scene_label=None, on_progress=None, should_stop=None, budget_at=None, budget_search_dirs=None,
            overrides=None) -> ReplayResult:
     """Render ``frame_range`` of ``camera`` in ``mode`` into ``run_dir``.
 
     ``on_progress(done, total, frame_ms)`` is called after each frame;
-    ``should_stop()`` is polled between frames (Esc in the UI).  ``budget_at`` (or the
-    scene's Budget At) is resolved to milliseconds from complete raster and raytrace runs of
-    the path in ``budget_search_dirs`` (default: beside ``run_dir``) or by a short
-    calibration, reported in ``summary.json`` (``budget_source``).  ``overrides`` sets
-    fields of the scene's settings (``phrt_addon.scene.Settings``) for this replay only."""
+    ``should_stop()`` is polled between frames (Esc in the UI); SIGINT and SIGTERM stop the
+    replay between frames too (``ReplayResult.signal``).  ``budget_at`` (or the scene's Budget
+    At) is resolved to milliseconds from complete raster and raytrace runs of the path in
+    ``budget_search_dirs`` (default: beside ``run_dir``) or by a short calibration, reported in
+    ``summary.json`` (``budget_source``).  ``overrides`` sets fields of the scene's settings
+    (``phrt_addon.scene.Settings``) for this replay only."""
     run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
                         resolution=resolution, scene_label=scene_label, budget_at=budget_at,
                         budget_search_dirs=budget_search_dirs, overrides=overrides)
     cancelled = False
-    while run.remaining:
-        if should_stop is not None and should_stop():
-            cancelled = True
-            break
+    received = []
+    with stop_on_signals(received):
+        while run.remaining:
+            if received or (should_stop is not None and should_stop()):
+                cancelled = True
+                break
+            try:
+                stats = run.step()
+            except ReplayInterrupted:
+                cancelled = True  # stopped in the middle of a frame: that frame is not kept
+                break
+            if on_progress is not None:
+                on_progress(run.done, run.total, stats["total_ms"])
+        result = run.finish(cancelled=cancelled or bool(received))
+    result.signal = received[0] if received else None
+    return result
+
+
+
+
+class _CapturedStderr:
+    """What Blender's C code wrote on stderr while rendering a frame: forwarded as it was once
+    the frame is known good, or summed up in the one-line error when it is not."""
+
+    def __init__(self):
+        self.text = ""
+
+    def reason(self) -> str:
+        """The last line that names an error, shortened (e.g. OpenEXR's 'File too large')."""
+        lines = [line.strip() for line in self.text.splitlines()
+                 if "error" in line.lower() and not line.startswith("EGL")]  # EGL_BAD_MATCH is harmless noise
+        if not lines:
+            return ""
+        line = lines[-1]
+        return line.rsplit(". ", 1)[-1][:120] if ". " in line else line[:120]
+
+    def forward(self):
+        if self.text:
+            sys.stderr.write(self.text)
+            sys.stderr.flush()
+
+
+@contextlib.contextmanager
+def _captured_stderr():
+    """Route file descriptor 2 (where Blender's C code writes) to a temporary file while the
+    block runs; the text is kept on the yielded object."""
+    captured = _CapturedStderr()
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as capture:
+        os.dup2(capture.fileno(), 2)
         try:
-            stats = run.step()
-        except ReplayInterrupted:
-            cancelled = True  # stopped in the middle of a frame: that frame is not kept
-            break
-        if on_progress is not None:
-            on_progress(run.done, run.total, stats["total_ms"])
-    return run.finish(cancelled=cancelled)
-
-
-EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
-                       "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
+            yield captured
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            capture.seek(0)
+            captured.text = capture.read().decode(errors="replace")
 
 
 def default_run_dir(out_root, scene_label, camera_name, mode) -> Path:

@@ -21,6 +21,8 @@ G-buffer layout (one texture set per layer, opaque and transparent):
 """
 from __future__ import annotations
 
+from ..phrt_addon import rules
+
 # Materials are stored in a float texture, MATERIAL_TABLE_WIDTH per row pair:
 # row 2k: (transmission, ior, alpha, 0); row 2k+1: (emission rgb, 0).
 MATERIAL_TABLE_WIDTH = 1024
@@ -38,13 +40,13 @@ void main() {
 }
 """
 
-GBUFFER_FRAG = """
+GBUFFER_FRAG = rules.GLSL_SAMPLE_TEXTURE + """
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) { n = -n; }
   vec4 albedo = base_color;
-  /* Wrap like the tracer (sample_texture): GPUTexture clamps to its edge by default. */
-  if (params.z > 0.5) { albedo *= texture(base_tex, fract(v_uv)); }
+  /* Sampled exactly as the tracer samples (rules.sample_texture: bilinear, wrapping). */
+  if (params.z > 0.5) { albedo *= phrt_sample_texture(base_tex, v_uv); }
   albedo = clamp(albedo, 0.0, 1.0);
   out_position = vec4(v_position, float(ids.x + 1));
   out_normal = vec4(n, params.x);
@@ -138,15 +140,22 @@ Surface read_surface(vec4 position_material, vec4 normal_roughness, vec4 albedo_
   return s;
 }
 
+/* Reflectance at grazing incidence: 1, fading to 0 for a surface with almost no specular
+   reflection (F0 below 2%: an IOR-1 surface reflects nothing, not a bright rim). */
+float specular_f90(vec3 f0) {
+  return clamp(50.0 * (f0.r + f0.g + f0.b) / 3.0, 0.0, 1.0);
+}
+
 vec3 fresnel_schlick(vec3 f0, float cos_theta) {
   float m = 1.0 - clamp(cos_theta, 0.0, 1.0);
-  return f0 + (1.0 - f0) * (m * m * m * m * m);
+  return f0 + (specular_f90(f0) - f0) * (m * m * m * m * m);
 }
 
 float fresnel_dielectric(float cos_incident, float eta) {
   float cos_i = clamp(abs(cos_incident), 0.0, 1.0);
   float sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
-  if (sin2_t >= 1.0) { return 1.0; }
+  if (sin2_t > 1.0) { return 1.0; }
+  if (abs(eta - 1.0) < 1e-12) { return 0.0; }  /* no interface: nothing is reflected */
   float cos_t = sqrt(clamp(1.0 - sin2_t, 0.0, 1.0));
   float rs = (cos_i - eta * cos_t) / max(cos_i + eta * cos_t, 1e-30);
   float rp = (eta * cos_i - cos_t) / max(eta * cos_i + cos_t, 1e-30);
@@ -320,7 +329,7 @@ COMPOSITE_FRAG = """
 vec3 shade_layer(Surface s, vec3 lights, vec4 traced_reflection, out float transmissive, out float fresnel_t) {
   vec3 world = camera.world.rgb;
   float m = 1.0 - clamp(s.n_dot_v, 0.0, 1.0);
-  float ceiling = max(1.0 - s.roughness, max(s.f0.r, max(s.f0.g, s.f0.b)));
+  float ceiling = min(max(1.0 - s.roughness, max(s.f0.r, max(s.f0.g, s.f0.b))), specular_f90(s.f0));
   vec3 env_fresnel = s.f0 + (max(vec3(ceiling), s.f0) - s.f0) * (m * m * m * m * m);
   vec3 color = s.emission + lights + s.albedo * s.diffuse_weight * (1.0 - env_fresnel) * world;
   transmissive = s.transmission * (1.0 - s.metallic);

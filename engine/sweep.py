@@ -15,6 +15,7 @@ import shutil
 import time
 from pathlib import Path
 
+from .. import blender_process
 from ..phrt_addon import executors
 from ..phrt_addon import oracle as oracle_module
 from ..phrt_addon import plan as plan_module
@@ -28,10 +29,9 @@ _WARM = set()
 
 def _load(scene_name):
     """Register PHRT and open ``scene_name`` (a .blend path or a sample scene name)."""
-    from .. import cli
-    cli._blender()
-    with cli._quiet_stdout():
-        cli.load_scene(scene_name)
+    blender_process.blender()
+    with blender_process.quiet_stdout():
+        blender_process.load_scene(scene_name)
 
 
 def _open_scene(plan, job):
@@ -41,7 +41,6 @@ def _open_scene(plan, job):
     while the others do not."""
     import tempfile
 
-    from .. import cli
     scene_name, label, path = plan.target(job)
     executors.on_main_thread(_load, scene_name)
     import bpy
@@ -49,7 +48,7 @@ def _open_scene(plan, job):
     camera = replay.find_path(scene, path)
     key = (scene_name, path, tuple(plan.resolution))
     if key not in _WARM:
-        with tempfile.TemporaryDirectory(prefix="phrt-warm-up-") as folder, cli._quiet_stdout():
+        with tempfile.TemporaryDirectory(prefix="phrt-warm-up-") as folder, blender_process.quiet_stdout():
             replay.replay(scene, camera, (plan.frames[0], plan.frames[0]), "RAYTRACE", Path(folder) / "run",
                           images="none", resolution=tuple(plan.resolution), scene_label=label)
         _WARM.add(key)
@@ -68,17 +67,16 @@ def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
     for stale in folder.glob(f".{job.id}.partial-*"):  # what an attempt that died left
         shutil.rmtree(stale, ignore_errors=True)
     partial = plan_module.partial_dir(folder, job)
-    from .. import cli  # the package root (cli.py): scene loading and stdout handling
     try:
         scene, camera = _open_scene(plan, job)
         try:
-            with cli._quiet_stdout():
+            with blender_process.quiet_stdout():
                 message = _run(plan, folder, job, scene, camera, partial)
             plan_module.publish(partial, folder / job.id)
         except BaseException:
             shutil.rmtree(partial, ignore_errors=True)
             raise
-    except (cli.UserError, replay.ReplayError) as error:  # bad input: retrying cannot help
+    except (blender_process.UserError, replay.ReplayError) as error:  # bad input: retrying cannot help
         return plan_module.JobOutcome(job.id, "failed", time.perf_counter() - begin,
                                       str(error).strip().splitlines()[0])
     return plan_module.JobOutcome(job.id, "done", time.perf_counter() - begin, message)
@@ -95,7 +93,7 @@ def _run(plan, folder, job, scene, camera, partial) -> str:
         if not references:
             references = [plan_module.run_id(label, path, mode) for mode in ("RASTER", "RAYTRACE")]
         result = replay.replay(scene, camera, frames, job.mode, partial, images="exr", resolution=resolution,
-                               scene_label=label, budget_at=job.budget_at,
+                               scene_label=label, budget_at=job.budget_at, budget_ms=job.budget_ms,
                                budget_search_dirs=[folder / reference for reference in references],
                                overrides=job.overrides)
         if result.cancelled:

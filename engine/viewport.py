@@ -10,7 +10,7 @@ orbiting a static scene costs a G-buffer and lighting pass; the image is rendere
 again only when the depsgraph or the view changed.
 
 The overlay (any shading mode): each element of the last final frame
-(``final.LAST_FRAME['rows']``) gets a coloured box by its decision -
+(``session.last_frame().rows``) gets a coloured box by its decision -
 ``overlay_colors(rows)`` is the tested data, ``draw_overlay`` the GPU drawing,
 which needs a window (never runs in background mode).
 
@@ -25,9 +25,10 @@ import types
 
 import numpy as np
 
+from ..phrt_addon import naming
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.scene import Camera
-from . import extract, final, gpu_resources
+from . import extract, final, session
 
 # What each decision looks like in the overlay (linear RGBA).  Elements that are
 # not candidates get no box: the overlay shows what the designer tagged.
@@ -69,33 +70,6 @@ def overlay_colors(rows) -> dict:
     return colors
 
 
-def element_object_name(element: str, object_names) -> str | None:
-    """The object an element name belongs to: ``Obj``, ``Obj/Material`` or an instance
-    ``Obj@Parent:id`` (optionally ``/Material``).  ``object_names`` is a container of
-    the existing object names (exact names win over parsing)."""
-    if element in object_names:
-        return element
-    if "/" in element:
-        head = element.rsplit("/", 1)[0]
-        if head in object_names:
-            return head
-        element = head
-    if "@" in element:
-        head = element.split("@", 1)[0]
-        if head in object_names:
-            return head
-    return None
-
-
-def instance_element_name(instance) -> str:
-    """The element name ``extract`` gives a depsgraph object instance (without material)."""
-    obj = instance.object
-    if instance.is_instance:
-        parent = instance.parent.name if instance.parent else "?"
-        return f"{obj.name}@{parent}:{instance.persistent_id[0]}"
-    return obj.name
-
-
 def overlay_boxes(depsgraph, colors) -> list:
     """``[(rgba, corners (8, 3) world space)]``: the bounding box of every drawn
     object or instance whose element (or one of its material elements) has a colour.
@@ -104,14 +78,15 @@ def overlay_boxes(depsgraph, colors) -> list:
         return []
     material_colors = {}  # element base name -> colours of its material elements
     for element, color in colors.items():
-        if "/" in element:
-            material_colors.setdefault(element.rsplit("/", 1)[0], []).append(color)
+        base = naming.base_element(element)
+        if base is not None:
+            material_colors.setdefault(base, []).append(color)
     boxes = []
     for instance in depsgraph.object_instances:
         obj = instance.object
         if obj.type not in extract.MESH_CONVERTIBLE:
             continue
-        base = instance_element_name(instance)
+        base = extract.instance_element_name(instance)
         entries = [(1.0, colors[base])] if base in colors else []
         entries += [(1.04, color) for color in material_colors.get(base, ())]
         if not entries:
@@ -141,7 +116,7 @@ def draw_overlay():
     space = context.space_data
     if space is None or space.type != "VIEW_3D" or not space.overlay.show_overlays:
         return
-    boxes = overlay_boxes(context.evaluated_depsgraph_get(), overlay_colors(final.LAST_FRAME["rows"]))
+    boxes = overlay_boxes(context.evaluated_depsgraph_get(), overlay_colors(session.last_frame().rows))
     if not boxes:
         return
     import gpu
@@ -160,23 +135,21 @@ def draw_overlay():
         gpu.state.blend_set("NONE")
 
 
-_OVERLAY_HANDLE = None
-
-
 def add_overlay_handler():
     """Install the overlay's draw handler (once; nothing to draw in background mode)."""
-    global _OVERLAY_HANDLE
     import bpy
-    if _OVERLAY_HANDLE is None and not bpy.app.background:
-        _OVERLAY_HANDLE = bpy.types.SpaceView3D.draw_handler_add(draw_overlay, (), "WINDOW", "POST_VIEW")
+    engine_session = session.current()
+    if engine_session.overlay_handle is None and not bpy.app.background:
+        engine_session.overlay_handle = bpy.types.SpaceView3D.draw_handler_add(draw_overlay, (), "WINDOW",
+                                                                               "POST_VIEW")
 
 
 def remove_overlay_handler():
-    global _OVERLAY_HANDLE
     import bpy
-    if _OVERLAY_HANDLE is not None:
-        bpy.types.SpaceView3D.draw_handler_remove(_OVERLAY_HANDLE, "WINDOW")
-        _OVERLAY_HANDLE = None
+    engine_session = session.current()
+    if engine_session.overlay_handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(engine_session.overlay_handle, "WINDOW")
+        engine_session.overlay_handle = None
 
 
 # -- Rendered shading ------------------------------------------------------------
@@ -219,7 +192,7 @@ def render_view(depsgraph, camera: Camera, renderer: FrameRenderer, read_back: b
     (``view_draw``, or ``render()`` of an engine with ``bl_use_gpu_context``).
     Returns the ``FrameResult``: ``passes.combined`` is the image read back ((h, w, 4), bottom
     row first), or None without ``read_back``; the GPU keeps it in the frame target "combined"
-    (``gpu_resources.RESOURCES.target``) until the next frame is drawn."""
+    (``the session's GPU resources' target``) until the next frame is drawn."""
     start = time.perf_counter()
     stand_in = _ViewCamera(camera.view_matrix, camera.projection, camera.ortho, camera.clip_start, camera.clip_end)
     snapshot = extract.extract(depsgraph, camera_override=stand_in)
@@ -244,7 +217,7 @@ class ViewportRender:
         self.renderer = FrameRenderer()
         self.stale = True
         self.view_key = None
-        self.image_frame = None  # RESOURCES.frames_drawn when this view's image was drawn
+        self.image_frame = None  # resources.frames_drawn when this view's image was drawn
         self.size = None
 
     def update(self, depsgraph):
@@ -261,7 +234,7 @@ class ViewportRender:
         view_matrix = np.array(region_3d.view_matrix, dtype=np.float64)
         window_matrix = np.array(region_3d.window_matrix, dtype=np.float64)
         key = (view_matrix.round(6).tobytes(), window_matrix.round(6).tobytes(), width, height)
-        resources = gpu_resources.RESOURCES
+        resources = session.current().resources
         if self.image_frame is not None and self.image_frame != resources.frames_drawn:
             self.stale = True  # another render drew into the frame targets since: draw ours again
         if self.stale or key != self.view_key:
@@ -281,7 +254,7 @@ class ViewportRender:
                                         f"{result.stats['n_selected']}/{result.stats['n_visible']} traced")
         # The frame's own GPU target is drawn: nothing is read back (textures are shared between
         # the render and the window's context).  No reference to it is kept here: GPU objects
-        # belong to RESOURCES alone, which frees them deliberately.
+        # belong to the session's resources alone, which frees them deliberately.
         texture = resources.target("combined", self.size) if self.image_frame is not None else None
         if texture is None:
             return

@@ -1,12 +1,12 @@
 """``phrt.replay_path``: replay a camera path over a frame range in one or more modes,
-one RUN_DIR per mode (CONTRACT.md sections 3 and 4).
+one RUN_DIR per mode (docs/properties.md, docs/formats.md).
 
 Two ways to run, same files:
 
 - In the UI (invoked from the N panel, F3, a button): a modal operator renders one
   frame per timer tick, shows progress (cursor counter and status bar) and stops
   between frames on Esc.  What was rendered stays valid: complete frames, flushed
-  logs and a ``summary.json`` marked ``"cancelled": true``.
+  logs and a ``summary.json`` marked ``"cancelled": true`` and ``"partial": true``.
 - From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
   ``engine.replay.replay()`` runs every frame of every mode to the end.
 
@@ -20,22 +20,11 @@ from pathlib import Path
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
-from ..engine import replay
+from ..engine import candidate_list, replay
+from ..properties import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_FLAG_ITEMS
 from ..phrt_addon import runlog
 from ..engine.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
 
-MODE_ITEMS = (
-    ("RASTER", "Raster", "Raster only: no ray tracing at all", 1),
-    ("HYBRID", "Hybrid", "Raster plus the ray tracing the heuristic selects within the budget", 2),
-    ("RAYTRACE", "Ray Trace", "Every visible candidate ray traced, no budget: the reference", 4),
-)
-IMAGE_ITEMS = (
-    ("EXR", "OpenEXR", "Multilayer EXR with every PHRT pass (needed by 'phrt report' error metrics)", 0),
-    ("PNG", "PNG", "8-bit sRGB PNG of the combined image", 1),
-    ("NONE", "None", "Logs only, no images", 2),
-)
-# '//' (relative to the .blend file) must be declared from Blender 4.5 (the oldest supported) on.
-BLEND_RELATIVE_PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"}
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
                       "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
@@ -65,8 +54,7 @@ def _path_search(self, context, edit_text):
 
 def _refresh_candidates(context):
     """Update the N panel's candidate list from the last frame (if the panels are registered)."""
-    from ..panels import candidates
-    candidates.refresh(context.window_manager, context.scene)
+    candidate_list.refresh(context.window_manager, context.scene)
 
 
 class PHRT_OT_replay_path(bpy.types.Operator):
@@ -91,7 +79,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
         description="Last frame to render (default: the path's last keyframe)",
     )
     modes: EnumProperty(
-        name="Modes", items=MODE_ITEMS, options={"ENUM_FLAG"}, default={"HYBRID"},
+        name="Modes", items=MODE_FLAG_ITEMS, options={"ENUM_FLAG"}, default={"HYBRID"},
         description="Render the path once in each chosen mode, each into its own run folder",
     )
     output_dir: StringProperty(
@@ -147,6 +135,8 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                 results.append(replay.replay(
                     scene, camera, frame_range, mode, self._run_dir(context, camera, mode, root),
                     images=self.images.lower(), scene_label=scene_label(scene), on_progress=progress))
+                if results[-1].signal:  # SIGINT / SIGTERM (blender -b): no further mode
+                    break
         except (replay.ReplayError, RuntimeError) as error:
             self.report({"ERROR"}, f"PHRT: replay of '{camera.name}' failed: {error}")
             return {"CANCELLED"}
@@ -154,11 +144,15 @@ class PHRT_OT_replay_path(bpy.types.Operator):
             window_manager.progress_end()
             _refresh_candidates(context)
         self._report_done(results, cancelled=False)
-        return {"FINISHED"}
+        return {"CANCELLED"} if any(result.signal for result in results) else {"FINISHED"}
 
     def _report_done(self, results, cancelled):
         runs = ", ".join(f"{result.mode.lower()} {result.frames_done} frames -> {result.run_dir}" for result in results)
+        cancelled = cancelled or any(result.cancelled for result in results)
         verb = "cancelled" if cancelled else "done"
+        # Each problem once per run, with its count (the frames warned only the first time).
+        for line in dict.fromkeys(line for result in results for line in result.problems):
+            self.report({"WARNING"}, f"PHRT: {line}")
         self.report({"WARNING" if cancelled else "INFO"}, f"PHRT replay {verb}: {runs or 'nothing rendered'}")
 
     # -- interactive: one frame per timer tick, Esc stops -----------------------------

@@ -14,9 +14,9 @@ from pathlib import Path
 import bpy
 from bpy.props import StringProperty
 
-from ..engine import final
+from ..engine import session
 from ..phrt_addon import runlog
-from .replay_path import BLEND_RELATIVE_PATH
+from ..properties import BLEND_RELATIVE_PATH
 
 FORMATS = (".csv", ".json")
 _BOOL_COLUMNS = ("visible", "selected")
@@ -72,7 +72,7 @@ def write_selection_log(rows, filepath) -> Path:
 def rows_to_export(run_dir: str = "") -> list:
     """The last rendered frame's rows, or every frame's rows of the replay in ``run_dir``."""
     if not run_dir:
-        return list(final.LAST_FRAME["rows"])
+        return list(session.last_frame().rows)
     folder = Path(bpy.path.abspath(run_dir))
     if not (folder / runlog.SELECTION_CSV).is_file():
         raise SelectionLogError(f"'{run_dir}' is not a run folder (no {runlog.SELECTION_CSV}): give a folder "

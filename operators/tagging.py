@@ -3,9 +3,10 @@
 import bpy
 from bpy.props import EnumProperty
 
+from ..engine import candidate_list
 from ..properties import PHRT_ObjectSettings
 
-# The per-element fields of Object.phrt and Material.phrt (CONTRACT.md section 3).
+# The per-element fields of Object.phrt and Material.phrt (docs/properties.md).
 ELEMENT_FIELDS = tuple(PHRT_ObjectSettings.__annotations__)
 
 
@@ -74,8 +75,7 @@ class PHRT_OT_refresh_candidates(bpy.types.Operator):
     bl_options = {"REGISTER"}
 
     def execute(self, context):
-        from ..panels import candidates
-        count = candidates.refresh(context.window_manager, context.scene)
+        count = candidate_list.refresh(context.window_manager, context.scene)
         self.report({"INFO"}, f"PHRT: {count} elements listed")
         return {"FINISHED"}
 

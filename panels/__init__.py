@@ -1,11 +1,13 @@
-"""PHRT's user interface in the 3D view sidebar (N panel, tab ``PHRT``).
+"""PHRT's user interface: Properties > Render and the 3D view sidebar (N panel, tab ``PHRT``).
 
-``candidates.py``: the candidate list (UIList, its collection and refreshing);
-``view3d.py``: the panels, the Replay panel's settings and the overlay toggle.
+``render.py``: the scene's renderer settings (Properties > Render);
+``candidates.py``: the N panel's candidate list (UIList and its refresh handlers);
+``view3d.py``: the N panels (element tags, candidates, replay, last render) and the overlay.
+Panels import only downward (properties, operators' names, engine, core).
 """
-from . import candidates, view3d
+from . import candidates, render, view3d
 
-_MODULES = (candidates, view3d)
+_MODULES = (render, candidates, view3d)
 
 
 def register():

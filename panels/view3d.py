@@ -2,28 +2,18 @@
 
 - Element: the active object's candidate tag, priority K, effects and cost Q, and
   (sub-panel) the active material's; both copy to the selection in one click.
-- Renderer: the scene's mode, budget (with the frame rate it means), I, max area,
-  bounces, cost model.
 - Candidates: every element with K and the last frame's R and decision; the overlay.
 - Replay: a camera path over a frame range in several modes; export the selection log.
 - Last Render: timings of the last frame and the problems it reported (skipped objects).
 
-Every panel shares ``PHRT_Panel``: shown only when the render engine is PHRT.
+Every panel shares ``PHRT_Panel``: shown only when the render engine is PHRT.  The scene's
+renderer settings are in Properties > Render (``panels/render.py``).
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
 
-from ..engine import final, replay, viewport
-from ..operators.replay_path import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_ITEMS
+from ..engine import candidate_list, replay, session, viewport
 from . import candidates
-
-
-def frame_rate_text(budget_ms: float) -> str:
-    """The frame rate a frame budget means: ``'60 fps'``; ``'no budget'`` for 0."""
-    if budget_ms <= 0:
-        return "no budget"
-    return f"{1000.0 / budget_ms:.3g} fps"
 
 
 class PHRT_Panel:
@@ -108,35 +98,6 @@ class PHRT_PT_element_material(PHRT_Panel, bpy.types.Panel):
         op.source = "MATERIAL"
 
 
-class PHRT_PT_renderer(PHRT_Panel, bpy.types.Panel):
-    """The scene's hybrid renderer settings."""
-
-    bl_label = "Renderer"
-    bl_order = 1
-
-    def draw(self, context):
-        layout = self.layout
-        settings = context.scene.phrt
-        layout.row().prop(settings, "mode", expand=True)
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        column = layout.column()
-        column.prop(settings, "use_budget_at")
-        if settings.use_budget_at:
-            column.prop(settings, "budget_at", text="Budget At (raster 0, ray traced 1)")
-        else:
-            row = column.row(align=True)
-            row.prop(settings, "budget_ms", text="Budget (ms)")
-            row.label(text=frame_rate_text(settings.budget_ms))
-        column.prop(settings, "selection_weight", text="Selection Weight I")
-        column.prop(settings, "relevance")
-        column.prop(settings, "selection_order")
-        column.prop(settings, "max_area_fraction", text="Max Area (of frame)")
-        column.prop(settings, "max_bounces")
-        column.prop(settings, "cost_mode")
-        column.prop(settings, "shadow_map_size", text="Shadow Map (px)")
-
-
 class PHRT_PT_candidates(PHRT_Panel, bpy.types.Panel):
     """Every element, its K and the last frame's decision."""
 
@@ -167,32 +128,12 @@ def _draw_candidate_details(layout, item):
     layout.label(text=item.name, icon=icon)
     column = layout.column(align=True)
     settings = candidates.live_settings(item)
-    priority, effects = ((settings.priority, candidates.effects_text(settings)) if settings is not None
+    priority, effects = ((settings.priority, candidate_list.effects_text(settings)) if settings is not None
                          else (item.priority, item.effects))
     column.label(text=f"Priority K {priority:.3g}   Effects {effects}")
     if item.rendered:
         column.label(text=f"V {item.visibility:.3g}   C {item.cost:.3g}   R {item.relevance:.3g}")
     column.label(text=text)
-
-
-class PHRT_ReplaySettings(bpy.types.PropertyGroup):
-    """What the Replay panel passes to phrt.replay_path (saved with the scene)."""
-
-    camera: PointerProperty(
-        name="Camera Path", type=bpy.types.Object, poll=lambda self, obj: obj.type == "CAMERA",
-        description="The animated camera to replay; empty: the scene's first path")
-    use_path_range: BoolProperty(
-        name="Whole Path", default=True,
-        description="Replay the camera's whole animation (its keyframe range); off: the frames below")
-    frame_start: IntProperty(name="Start", default=1, min=0, description="First frame to render")
-    frame_end: IntProperty(name="End", default=250, min=0, description="Last frame to render")
-    modes: EnumProperty(name="Modes", items=MODE_ITEMS, options={"ENUM_FLAG"}, default={"HYBRID"},
-                        description="Render the path once in each chosen mode, each into its own run folder")
-    output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//phrt_runs", options=BLEND_RELATIVE_PATH,
-                               description="Run folders <scene>-<path>-<mode> are written here "
-                                           "('//' is the .blend file's folder)")
-    images: EnumProperty(name="Images", items=IMAGE_ITEMS, default="EXR",
-                         description="Image format of the rendered frames")
 
 
 class PHRT_PT_replay(PHRT_Panel, bpy.types.Panel):
@@ -248,7 +189,7 @@ class PHRT_PT_last_render(PHRT_Panel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        stats = final.LAST_FRAME["stats"]
+        stats = session.last_frame().stats
         if not stats:
             layout.label(text="Nothing rendered yet (F12)", icon="INFO")
         else:
@@ -260,7 +201,7 @@ class PHRT_PT_last_render(PHRT_Panel, bpy.types.Panel):
                               f"{stats.get('composite_ms', 0.0):.0f} ms")
             column.label(text=f"Ray traced {stats.get('n_selected', 0)} of {stats.get('n_visible', 0)} visible, "
                               f"{stats.get('n_candidates', 0)} candidates")
-        problems = final.LAST_FRAME["problems"]
+        problems = session.last_frame().problems
         box = layout.box()
         if not problems:
             box.label(text="No problems", icon="CHECKMARK")
@@ -271,31 +212,18 @@ class PHRT_PT_last_render(PHRT_Panel, bpy.types.Panel):
             column.label(text=problem)
 
 
-PANELS = (PHRT_PT_element, PHRT_PT_element_material, PHRT_PT_renderer, PHRT_PT_candidates, PHRT_PT_replay,
+PANELS = (PHRT_PT_element, PHRT_PT_element_material, PHRT_PT_candidates, PHRT_PT_replay,
           PHRT_PT_last_render)
-CLASSES = (PHRT_ReplaySettings,) + PANELS
-
-
-def _toggle_overlay(window_manager, context):
-    for area in context.screen.areas if context.screen else ():
-        if area.type == "VIEW_3D":
-            area.tag_redraw()
+CLASSES = PANELS
 
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
-    bpy.types.Scene.phrt_replay = PointerProperty(type=PHRT_ReplaySettings, name="PHRT Replay",
-                                                  description="Settings of the Replay panel")
-    bpy.types.WindowManager.phrt_overlay = BoolProperty(
-        name="Decision Overlay", default=False, update=_toggle_overlay,
-        description="Box every candidate in the 3D view, coloured by the last rendered frame's decision")
     viewport.add_overlay_handler()
 
 
 def unregister():
     viewport.remove_overlay_handler()
-    del bpy.types.WindowManager.phrt_overlay
-    del bpy.types.Scene.phrt_replay
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -20,7 +20,7 @@ Two cost modes, both always learned so that a report can compare them:
     per effect), a global ``residual`` that absorbs what the per-effect split
     cannot explain (mixed effects, per-frame overhead), and the designer's Q.
 
-Q is a designer multiplier (CONTRACT.md section 3): with Q = 1 the prediction is
+Q is a designer multiplier (docs/properties.md): with Q = 1 the prediction is
 the time the model expects to measure; Q = 2 charges an element twice its
 expected time against the budget.  The learning itself never involves Q in the
 measured mode (rays and milliseconds are physical).
@@ -33,11 +33,14 @@ Learning every quantity uses :class:`RobustEstimate`, built for the budget loop:
 * noise: inside a gate (ratio ``gate_ratio``) an exponential moving average in
   the log domain, which converges monotonically (no overshoot);
 * outliers: an observation outside the gate is ignored;
-* step changes: ``confirm`` consecutive observations outside the gate mean the
-  quantity really changed, and the estimate jumps to the median of the recent
-  window.  A 10x step of the cost per ray is therefore followed exactly after
-  ``confirm`` frames, without oscillating (the stiff case of the budget loop,
-  simulated in tests/core/test_cost_model.py).
+* step changes: consecutive observations outside the gate on the same side mean
+  the quantity really changed, and the estimate jumps to the median of them:
+  ``confirm_up`` (2) above the gate - a cost that rose puts frames over budget,
+  so at most two in a row - and ``confirm`` (3) below it - a cost that fell only
+  leaves time unused.  A 10x step of the cost per ray is therefore followed
+  exactly after 2 (up) or 3 (down) frames, without oscillating (the stiff case
+  of the budget loop, simulated in tests/core/test_cost_model.py and
+  tests/core/test_budget_loop.py).
 """
 from __future__ import annotations
 
@@ -49,18 +52,22 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-EFFECTS = ("shadows", "reflections", "refractions")
+from .schema import COST_MODES, EFFECTS
+
 STAGES = ("raster", "select", "composite")
-COST_MODES = ("paper", "measured")
 
 # Priors, used only until the first measurement of each quantity.  Rough values
-# for a 640x480 frame on 2 CPU cores (see /work/shared/PLATFORM-NOTES.md).
+# for a 640x480 frame on 2 CPU cores (see docs/platform-notes.md).
 STAGE_PRIOR_MS = {"raster": 50.0, "select": 1.0, "composite": 5.0}
 MS_PER_RAY_PRIOR = {"shadows": 1.5e-4, "reflections": 3e-4, "refractions": 3e-4}
 # ms per unit of the paper's cost C (V normalised to 1 for the frame's most
 # visible candidate): the most visible element with Q = 1 is guessed at 20 ms.
 PAPER_MS_PER_COST_PRIOR = 20.0
 
+# An effect never measured yet in this replay is charged this many times its prior cost per ray:
+# a first guess that is too cheap would select an element for one frame and drop it the next
+# (an over-budget frame and two selection flips); one measurement replaces the guess.
+UNMEASURED_MARGIN = 1.5
 # Smallest stage time worth a logarithm (a stage measured at 0 ms is this).
 STAGE_FLOOR_MS = 1e-3
 # Upper clamp of any predicted time: keeps sums finite whatever the input.
@@ -85,18 +92,22 @@ class RobustEstimate:
     ``prior``        value before any measurement (must be > 0)
     ``smoothing``    EMA weight of an observation inside the gate
     ``gate_ratio``   an observation within [value / gate_ratio, value * gate_ratio] is noise
-    ``confirm``      consecutive observations outside the gate that are a real change
+    ``confirm``      consecutive observations below the gate that are a real change
+    ``confirm_up``   the same above the gate (default: ``min(2, confirm)``)
     ``window``       observations kept for the median (cold start and re-anchoring)
     ``floor``        observations in [0, floor) count as ``floor``; negative, NaN or
                      infinite observations are ignored
     """
 
     def __init__(self, prior: float, *, smoothing: float = 0.3, gate_ratio: float = 1.3,
-                 confirm: int = 3, window: int = 5, floor: float = 0.0):
+                 confirm: int = 3, window: int = 5, floor: float = 0.0, confirm_up: int | None = None):
         if not (math.isfinite(prior) and prior > 0):
             raise ValueError(f"prior must be a positive finite number, not {prior!r}")
-        if not (0.0 < smoothing <= 1.0 and gate_ratio > 1.0 and 1 <= confirm <= window):
-            raise ValueError("need 0 < smoothing <= 1, gate_ratio > 1 and 1 <= confirm <= window")
+        confirm_up = min(2, confirm) if confirm_up is None else confirm_up
+        if not (0.0 < smoothing <= 1.0 and gate_ratio > 1.0 and 1 <= confirm <= window
+                and 1 <= confirm_up <= window):
+            raise ValueError("need 0 < smoothing <= 1, gate_ratio > 1 and 1 <= confirm, confirm_up <= window")
+        self._confirm_up = confirm_up
         self._log_value = math.log(prior)
         self._value = float(prior)
         self._smoothing = smoothing
@@ -136,9 +147,12 @@ class RobustEstimate:
             self._log_value += self._smoothing * innovation
             self._outside_gate = 0
         else:
-            self._outside_gate += 1
-            if self._outside_gate >= self._confirm:
-                self._log_value = statistics.median(self._recent)
+            side = 1 if innovation > 0 else -1
+            # Consecutive observations outside the gate on one side (a change of side starts over).
+            self._outside_gate = self._outside_gate + side if self._outside_gate * side > 0 else side
+            needed = self._confirm_up if side > 0 else self._confirm
+            if abs(self._outside_gate) >= needed:
+                self._log_value = statistics.median(list(self._recent)[-needed:])
                 self._outside_gate = 0
         self._value = math.exp(self._log_value)
         return True
@@ -258,7 +272,8 @@ class CostModel:
         the share of rays each effect has had lately (an element's own split of
         rays between its effects is not measured); the all-effects mix for an
         element with no effect flagged."""
-        per_effect = np.array([self._ms_per_ray[effect].value for effect in EFFECTS])
+        per_effect = np.array([self._ms_per_ray[effect].value * (UNMEASURED_MARGIN if not
+                               self._ms_per_ray[effect].observations else 1.0) for effect in EFFECTS])
         weights = np.maximum(self._ray_share, 1e-3)
         effects = np.stack([elements.shadows, elements.reflections, elements.refractions], axis=1).astype(np.float64)
         numerator = effects @ (weights * per_effect)

@@ -153,22 +153,24 @@ class _WorkerExits(logging.Filter):
         return record.levelno >= logging.WARNING
 
 
-_worker_exits = None
+def _worker_exits() -> _WorkerExits:
+    """The process's filter on the ``distributed.nanny`` logger (added the first time)."""
+    logger = logging.getLogger("distributed.nanny")
+    found = next((item for item in logger.filters if isinstance(item, _WorkerExits)), None)
+    if found is None:
+        found = _WorkerExits()
+        logger.addFilter(found)
+    return found
 
 
 def _listen_to_worker_exits(listener: list):
-    global _worker_exits
-    logger = logging.getLogger("distributed.nanny")
-    if _worker_exits is None:
-        _worker_exits = _WorkerExits()
-        logger.addFilter(_worker_exits)
-    _worker_exits.listeners.append(listener)
-    logger.setLevel(logging.INFO)
+    _worker_exits().listeners.append(listener)
+    logging.getLogger("distributed.nanny").setLevel(logging.INFO)
 
 
 def _stop_listening(listener: list):
-    if _worker_exits is not None and any(item is listener for item in _worker_exits.listeners):
-        _worker_exits.listeners = [item for item in _worker_exits.listeners if item is not listener]
+    watcher = _worker_exits()
+    watcher.listeners = [item for item in watcher.listeners if item is not listener]
 
 
 class DaskExecutor:

@@ -33,9 +33,10 @@ from typing import Protocol
 
 import numpy as np
 
-from . import benefit, heuristic, shading
+from . import benefit, heuristic, rules, shading
 from .cost_model import CostModel, FrameStats
-from .gbuffer import GBuffer, element_pixel_stats
+from .gbuffer import GBuffer, element_pixel_stats, geometric_normals
+from .problems import ProblemLog
 from .scene import SceneSnapshot
 from .shadow_region import ElementBounds, ShadowRegionIndex
 
@@ -83,7 +84,6 @@ class FramePasses:
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
     element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
-    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
 
 
 @dataclass
@@ -108,6 +108,7 @@ class LayerPixels:
     for the subsets that get rays."""
 
     def __init__(self, layer, origin, camera, materials: shading.MaterialTable):
+        self.layer = layer
         self.flat = np.flatnonzero(layer.covered.ravel())
         self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
         self.origin = np.asarray(origin, np.float64)
@@ -140,6 +141,10 @@ class LayerPixels:
         normal[back] *= -1.0
         return normal
 
+    def geometric_normals(self, index, view_directions) -> np.ndarray:
+        """Face normals facing the camera (where secondary rays leave from: rules of tracer.py)."""
+        return geometric_normals(self.layer, self.flat[index], view_directions)
+
     def camera_distance(self, index=slice(None)) -> np.ndarray:
         """Distance from the camera: the size of the points' float32 error, which secondary-ray
         offsets must exceed (telephoto views)."""
@@ -161,6 +166,8 @@ class FrameRenderer:
         self.benefit_model = benefit.BenefitModel()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None
+        self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
+        self._textures = {}  # id(snapshot texture) -> (texture, rules.prepare_texture of it)
 
     def close(self):
         if self.trace_scene is not None:
@@ -175,7 +182,7 @@ class FrameRenderer:
         if self.cost_model is None:
             self.cost_model = CostModel()
         n_elements = len(snapshot.elements)
-        candidate = np.array([e.candidate and e.priority > 0 for e in snapshot.elements], bool)
+        candidate = np.array([e.is_candidate for e in snapshot.elements], bool)
 
         # -- element statistics; the layers are read back only if rays may be traced ----
         start = _timer()
@@ -208,7 +215,7 @@ class FrameRenderer:
                                     flags["shadows"], materials)) if learn_benefit else None
         frame_elements = heuristic.FrameElements(
             names=[e.name for e in snapshot.elements],
-            candidate=np.array([e.candidate for e in snapshot.elements], bool),
+            candidate=candidate,
             area_px=area_px, centre_ndc=centre_ndc, distance=distance,
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
@@ -323,7 +330,7 @@ class FrameRenderer:
         points = samples.world(slice(None, None, FOOTPRINT_STEP * FOOTPRINT_STEP))
         scale = FOOTPRINT_STEP * FOOTPRINT_STEP
         casters = [index for index, element in enumerate(snapshot.elements)
-                   if element.candidate and element.shadows and area_px[index] > 0
+                   if element.is_candidate and element.shadows and area_px[index] > 0
                    and element_bounds[index] is not None]
         for light in snapshot.lights:
             if not light.cast_shadows or not casters:
@@ -334,24 +341,41 @@ class FrameRenderer:
         return footprint
 
     # ------------------------------------------------------------------
+    def _prepared_texture(self, texture):
+        """``rules.prepare_texture`` of a snapshot's texture, once per image (bounded)."""
+        entry = self._textures.get(id(texture))
+        if entry is None or entry[0] is not texture:
+            if len(self._textures) >= 64:
+                self._textures.clear()
+            entry = self._textures[id(texture)] = (texture, rules.prepare_texture(texture))
+        return entry[1]
+
     def _trace(self, snapshot, layers, materials, selected, element_bounds, counters, element_rays) -> TracedTerms:
-        from .tracer import RadianceTracer, TraceScene, ray_epsilon, reflection_blend
+        from .tracer import RadianceTracer, TraceScene, leave_surface, reflection_blend
 
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
-        transparent_materials = np.array([m.is_transparent for m in snapshot.materials], bool)
         static_builds = self.trace_scene.stats["static_builds"]
-        update_ms = self.trace_scene.update(snapshot, transparent_materials)
+        update_ms = self.trace_scene.update(snapshot, materials.casts_shadow[:len(snapshot.materials)])
         # Only a build of the static scene is one-time work; checking that nothing changed and
         # rebuilding the moving objects' scene recur every frame (the cost model learns them).
         if self.trace_scene.stats["static_builds"] != static_builds:
             counters.upload_ms = update_ms
         scene = self.trace_scene
-        textures = {index: m.texture for index, m in enumerate(snapshot.materials) if m.texture is not None}
+        textures = {index: self._prepared_texture(m.texture) for index, m in enumerate(snapshot.materials)
+                    if m.texture is not None}
         tracer = RadianceTracer(scene, snapshot, materials, textures)
         elements = snapshot.elements
         traced = TracedTerms()
         world = np.asarray(snapshot.world_color, dtype=np.float64)
+        n_elements = len(elements)
+
+        def ray_start(pixels, idx, view_dirs):
+            """Trace-frame points, their geometric normals facing the camera and ray offsets."""
+            points_trace = scene.to_trace(pixels.world(idx))  # only the pixels that get rays
+            normal = pixels.geometric_normals(idx, view_dirs)
+            eps = scene.epsilon(points_trace, pixels.camera_distance(idx), element=pixels.element[idx])
+            return points_trace, normal, eps
 
         # Shadows: for each light, the pixels a selected caster can shadow get traced visibility.
         start = _timer()
@@ -374,39 +398,37 @@ class FrameRenderer:
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:
                     continue
-                points_trace = scene.to_trace(points_world[idx])  # only the pixels that get rays
-                direction, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                normal = pixels.normals(idx)
-                facing = shading.dot(normal, direction) > 0  # the BRDF is zero elsewhere
-                idx, points_trace, direction, distance, normal = (
-                    idx[facing], points_trace[facing], direction[facing], distance[facing], normal[facing])
+                direction, _, _ = shading.light_incidence(light, scene.to_trace(points_world[idx]), scene.origin)
+                view_dirs = pixels.view_directions(idx)
+                facing = shading.dot(pixels.normals(idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
+                idx, direction, view_dirs = idx[facing], direction[facing], view_dirs[facing]
                 if len(idx) == 0:
                     continue
-                eps = ray_epsilon(points_trace, scene.extent, pixels.camera_distance(idx))
-                origins = points_trace + normal * eps[:, None]
-                blocked = scene.occluded(origins, direction, distance - 2 * eps)
+                points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
+                _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
+                blocked = scene.occluded(points_trace + normal * eps[:, None], direction, distance - 2 * eps)
                 traced.shadow_visibility[(layer_name, light_index)] = (
                     pixels.flat[idx], np.where(blocked, 0.0, 1.0).astype(np.float32))
                 counters.shadow_rays += len(idx)
         counters.shadow_ms = _ms(start)
+        # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
+        bounces = int(snapshot.settings.max_bounces) >= 1
 
         # Reflections on selected elements' pixels (mirror direction, blended by roughness).
         start = _timer()
         rays_before = tracer.rays + tracer.shadow_rays
-        reflecting = np.array([bool(selected[i]) and elements[i].reflections for i in range(len(elements))] + [False])
+        reflecting = np.array([bool(selected[i]) and elements[i].reflections for i in range(n_elements)] + [False])
         for layer_name, pixels in layers.items():
-            if len(pixels) == 0:
+            if not bounces or len(pixels) == 0:
                 continue
-            element_of = np.where(pixels.element >= 0, pixels.element, -1)
+            element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
             wanted = reflecting[element_of] & (reflection_blend(pixels.roughness) > 0)
             idx = np.flatnonzero(wanted)
             if len(idx) == 0:
                 continue
-            points_trace = scene.to_trace(pixels.world(idx))
-            eps = ray_epsilon(points_trace, scene.extent, pixels.camera_distance(idx))
             view_dirs = pixels.view_directions(idx)
-            normal = pixels.normals(idx, view_dirs)
-            direction = shading.reflect(view_dirs, normal)
+            points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
+            direction = leave_surface(shading.reflect(view_dirs, pixels.normals(idx, view_dirs)), normal)
             radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
             blend = reflection_blend(pixels.roughness[idx])[:, None]
             traced.reflection[layer_name] = (pixels.flat[idx], blend * radiance + (1.0 - blend) * world)
@@ -418,19 +440,18 @@ class FrameRenderer:
         start = _timer()
         rays_before = tracer.rays + tracer.shadow_rays
         pixels = layers["transparent"]
-        if len(pixels):
+        if bounces and len(pixels):
             refracting = np.array([bool(selected[i]) and elements[i].refractions
-                                   for i in range(len(elements))] + [False])
-            element_of = np.where(pixels.element >= 0, pixels.element, -1)
-            wanted = refracting[element_of] & (materials.transmission[pixels.material] > 1e-3)
+                                   for i in range(n_elements)] + [False])
+            element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
+            wanted = refracting[element_of] & (materials.transmissive[pixels.material] > rules.TRANSPARENT_EPSILON)
             idx = np.flatnonzero(wanted)
             if len(idx):
-                points_trace = scene.to_trace(pixels.world(idx))
-                eps = ray_epsilon(points_trace, scene.extent, pixels.camera_distance(idx))
                 view_dirs = pixels.view_directions(idx)
-                normal = pixels.normals(idx, view_dirs)
+                points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
                 ior = materials.ior[pixels.material[idx]]
-                direction, _ = shading.refract(view_dirs, normal, 1.0 / ior)
+                direction, _ = shading.refract(view_dirs, pixels.normals(idx, view_dirs), 1.0 / ior)
+                direction = leave_surface(direction, normal, side=-1.0)
                 radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
                 traced.refraction = (pixels.flat[idx], radiance)
                 np.add.at(element_rays, element_of[idx], 1)

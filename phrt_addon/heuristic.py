@@ -11,7 +11,7 @@ Plain Python + numpy (no ``bpy``), one frame at a time:
    the cost-ordered list and the relevance order;
 3. node selection of section V.C within the time left T (:func:`select`), with
    the graph rebuilt every frame (V.D) and one explainable row per element
-   (:meth:`SelectionResult.rows`, the columns of CONTRACT.md section 4).
+   (:meth:`SelectionResult.rows`, the columns of docs/formats.md).
 
 An element is an object tagged ``candidate``, or the faces of one material slot
 whose material is tagged.  Non-candidates are passed too: they get rows (reason
@@ -98,7 +98,7 @@ Budget as a fraction (``budget_at``)
     millisecond figure.  Replays resolve it to milliseconds once, before the
     first frame (``engine/budget.py``); this per-frame form serves single renders.
 Hysteresis margin
-    Used by :func:`hysteresis_margin` and the property tests: for a competing
+    Computed by ``tests/core/hysteresis.py`` for the property tests: for a competing
     element, how much its V can change (with everything else, its cost and the
     frame's visibility scale unchanged) before its relevance crosses that of a
     competing element in the other state.  Greedy selection keeps the element's
@@ -115,19 +115,15 @@ from dataclasses import dataclass, field
 from dataclasses import replace as dataclass_replace
 from functools import cached_property
 from itertools import compress
-from typing import Iterable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from . import defaults
+from .schema import MODES, ORDERS, REASONS, RELEVANCES, SELECTION_COLUMNS  # noqa: F401 (re-exported)
 from .cost_model import MAX_PREDICTED_MS, CostModel, normalise_cost_mode
 
-# Contract columns of selection.csv (CONTRACT.md section 4), in order.
-SELECTION_COLUMNS = ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S", "R", "selected", "reason")
-REASONS = ("not_visible", "over_area", "over_budget", "not_candidate")
-MODES = ("RASTER", "HYBRID", "RAYTRACE")
-RELEVANCES = ("paper", "error")
-ORDERS = ("relevance", "relevance_per_ms")
+# Contract columns of selection.csv (docs/formats.md), in order.
 # The smallest predicted cost an R-per-ms order divides by (a 0 ms node comes first).
 MIN_ORDER_MS = 1e-6
 
@@ -624,70 +620,3 @@ def force_selection(result: SelectionResult, names) -> SelectionResult:
     return dataclass_replace(result, selected=selected, reason=reason.tolist(), phase=phase,
                              trace_order=trace_order,
                              predicted_trace_ms=float(min(np.sum(result.predicted_ms[selected]), MAX_PREDICTED_MS)))
-
-
-def hysteresis_margin(result: SelectionResult) -> np.ndarray:
-    """Per element, how much its V may change and leave its state unchanged.
-
-    See "Hysteresis margin" in the module docstring.  Defined for HYBRID
-    results; ``UNBOUNDED_MARGIN`` where no element of the other state can be
-    crossed (non-competing elements, K = 0, no rival on the relevant side).
-    Assumes the element's cost and the frame's visibility scale stay as they
-    are (V changed through D, the element not the frame's most visible).
-    """
-    n = len(result.names)
-    margin = np.full(n, UNBOUNDED_MARGIN)
-    competing = result.terms.candidate & result.visible & result.terms.within_area
-    nodes = np.flatnonzero(competing)
-    if len(nodes) == 0 or result.mode != "HYBRID":
-        return margin
-    graph = SelectionGraph(nodes, result.predicted_ms[nodes], result.R[nodes])
-    ordered = nodes[graph.relevance_order]
-    relevance = result.R[ordered]
-    chosen = result.selected[ordered]
-    priority = result.K[ordered]
-    positions = np.arange(len(ordered))
-    unselected_positions = positions[~chosen]
-    selected_positions = positions[chosen]
-    gap = np.full(len(ordered), np.inf)
-    # Selected: the first unselected node after it has the highest relevance below.
-    after = np.searchsorted(unselected_positions, positions, side="right")
-    has_below = chosen & (after < len(unselected_positions))
-    below = unselected_positions[np.minimum(after, max(len(unselected_positions) - 1, 0))] if len(
-        unselected_positions) else positions
-    gap[has_below] = relevance[has_below] - relevance[below[has_below]]
-    # Unselected: the last selected node before it has the lowest relevance above.
-    before = np.searchsorted(selected_positions, positions, side="left") - 1
-    has_above = ~chosen & (before >= 0)
-    above = selected_positions[np.maximum(before, 0)] if len(selected_positions) else positions
-    gap[has_above] = relevance[above[has_above]] - relevance[has_above]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        in_visibility = np.where(priority > 0, gap / priority, np.inf)
-    margin[ordered] = np.where(np.isfinite(in_visibility), in_visibility, UNBOUNDED_MARGIN)
-    return margin
-
-
-def selection_flips(history: Iterable, names: Iterable[str] | None = None) -> dict[str, float]:
-    """Selection flips per element per 100 frames, from a run's selections.
-
-    ``history`` holds one selection per frame in order: a SelectionResult, a
-    mapping name -> selected, or an iterable of selected names.  A flip is a
-    change of an element's selected state between consecutive frames (an
-    element absent from a frame counts as not selected); the rate is per 100
-    frame-to-frame transitions.  ``names`` adds elements never selected (rate 0).
-    """
-    selections = []
-    for entry in history:
-        if isinstance(entry, SelectionResult):
-            selections.append(entry.selected_names())
-        elif isinstance(entry, Mapping):
-            selections.append(frozenset(str(name) for name, chosen in entry.items() if chosen))
-        else:
-            selections.append(frozenset(str(name) for name in entry))
-    everyone = set(names or ()).union(*selections) if selections else set(names or ())
-    flips = dict.fromkeys(sorted(everyone), 0)
-    for before, after in zip(selections, selections[1:]):
-        for name in before.symmetric_difference(after):
-            flips[name] += 1
-    transitions = max(len(selections) - 1, 1)
-    return {name: 100.0 * count / transitions for name, count in flips.items()}

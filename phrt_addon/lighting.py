@@ -9,7 +9,7 @@ implements - so that:
   checks they agree (the parity test of the GPU path);
 - core tests run ``FrameRenderer`` on a hand-built G-buffer without Blender.
 
-It is about 7x slower than the GPU passes on llvmpipe (PLATFORM-NOTES); the engine
+It is about 7x slower than the GPU passes on llvmpipe (docs/platform-notes.md); the engine
 never uses it to render.
 """
 from __future__ import annotations

@@ -32,11 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .schema import COMBINED_PASS
+
 PSNR_CAP_DB = 100.0
 RELMSE_EPSILON = 0.01
 HALF_MAX = 65504.0
 # The pass whose RGB channels read_image returns from a multilayer EXR.
-COMBINED_PASS = "Combined"
 
 
 def linear_to_srgb(linear):

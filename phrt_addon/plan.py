@@ -81,6 +81,7 @@ class Job:
     variant: str | None = None
     overrides: dict = field(default_factory=dict)
     depends_on: list = field(default_factory=list)
+    budget_ms: float | None = None  # a fixed frame budget (a hybrid run), instead of budget_at or the scene's
     scene: str | None = None  # None: the plan's scene (and scene_label), path and frames
     scene_label: str | None = None
     path: str | None = None

@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics, runlog
+from .schema import ELEMENT_PASS
 
-ELEMENT_PASS = "PHRT Element"
 # Pixels around an element's bounding box given to FLIP (its filters reach a few pixels).
 MARGIN_PX = 8
 

@@ -1,6 +1,6 @@
 """Run logs: the files a replay writes into its RUN_DIR, and their readers.
 
-A RUN_DIR (CONTRACT.md section 4) holds
+A RUN_DIR (docs/formats.md) holds
 
 - ``frames.csv``: one row per frame (timings of each stage, the budget, counts);
 - ``selection.csv``: one row per (frame, element): the heuristic's inputs
@@ -22,6 +22,8 @@ Plain Python, no ``bpy``: the caller passes the Blender and embreex versions.
 """
 import csv
 import json
+import struct
+from array import array
 import logging
 import math
 import os
@@ -31,28 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .schema import (BOOL_COLUMNS, FRAME_COLUMNS, FRAMES_CSV, FRAMES_DIR, REASONS,  # noqa: F401 (re-exported)
+                     SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, STRING_COLUMNS, SUMMARY_JSON)
+
 log = logging.getLogger(__name__)
 
-FRAMES_CSV = "frames.csv"
-SELECTION_CSV = "selection.csv"
-SUMMARY_JSON = "summary.json"
-FRAMES_DIR = "frames"
-
-FRAME_COLUMNS = (
-    "frame", "mode", "total_ms", "raster_ms", "select_ms", "trace_ms",
-    "composite_ms", "budget_ms", "predicted_trace_ms", "n_candidates",
-    "n_visible", "n_selected", "rays",
-)
-SELECTION_COLUMNS = (
-    "frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S", "R",
-    "selected", "reason",
-)
-STAGE_COLUMNS = ("raster_ms", "select_ms", "trace_ms", "composite_ms")
-# Why an element was not ray traced; empty when it was selected.
-REASONS = ("not_visible", "over_area", "over_budget", "not_candidate")
-
-_STRING_COLUMNS = frozenset({"mode", "element", "reason"})
-_BOOL_COLUMNS = frozenset({"visible", "selected"})
 # Keys of summary.json the caller must pass to close() (the rest is computed).
 SUMMARY_REQUIRED_KEYS = ("scene", "path", "resolution", "blender_version", "embreex_version")
 SIGNIFICANT_DIGITS = 6
@@ -125,6 +110,7 @@ class _CsvTable:
         self.extra = None if extra is None else tuple(extra)
         self.columns = None
         self.non_finite = 0
+        self._warned = set()
         self._file = open(self.path, "w", newline="", encoding="utf-8")
         self._writer = csv.writer(self._file, lineterminator="\n")
 
@@ -155,8 +141,10 @@ class _CsvTable:
             for key in self.columns:
                 if _is_non_finite(row.get(key)):
                     self.non_finite += 1
-                    log.warning("%s: non-finite %s=%r in frame %s written as empty",
-                                self.path.name, key, row.get(key), row.get("frame"))
+                    if key not in self._warned:  # once per column; summary.json has the count
+                        self._warned.add(key)
+                        log.warning("%s: non-finite %s=%r in frame %s written as empty (further ones are "
+                                    "counted in summary.json)", self.path.name, key, row.get(key), row.get("frame"))
         self._writer.writerows([format_value(row.get(key)) for key in self.columns] for row in rows)
 
     def flush(self):
@@ -168,6 +156,18 @@ class _CsvTable:
         if not self._file.closed:
             self.flush()
             self._file.close()
+
+    def abandon(self):
+        """Close without writing what is still buffered (after a write error)."""
+        if not self._file.closed:
+            try:
+                os.close(self._file.fileno())
+            except OSError:
+                pass
+            try:
+                self._file.close()
+            except (OSError, ValueError):
+                pass
 
 
 class RunLog:
@@ -197,13 +197,15 @@ class RunLog:
         self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
                                     extra_selection_columns)
         self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
-        self._frame_rows = []
-        self._selection_states = []
+        # What summary.json needs, kept compact (a 1000-frame replay must not grow with its length
+        # more than it must): one tuple per frame, per element its frames and selected flags.
+        self._frame_values = []
+        self._selection_states = {}  # element -> (array of frames, bytearray of selected flags)
         self._closed = False
 
     @property
     def frame_count(self):
-        return len(self._frame_rows)
+        return len(self._frame_values)
 
     def add_frame(self, frame_row, selection_rows=()):
         """Append one frame (and its selection rows) and flush both CSVs."""
@@ -228,10 +230,14 @@ class RunLog:
         self._selection.flush()
         self._frames.write([frame_row])
         self._frames.flush()
-        self._frame_rows.append({key: frame_row.get(key) for key in FRAME_COLUMNS})
-        self._selection_states.extend(
-            {"frame": int(frame), "element": str(row["element"]), "selected": bool(row["selected"])}
-            for row in selection_rows)
+        self._frame_values.append(tuple(frame_row.get(key) for key in FRAME_COLUMNS))
+        for row in selection_rows:
+            element = str(row["element"])
+            states = self._selection_states.get(element)
+            if states is None:
+                states = self._selection_states[element] = (array("q"), bytearray())
+            states[0].append(int(frame))
+            states[1].append(1 if row["selected"] else 0)
 
     def close(self, summary_extra):
         """Close both CSVs and write ``summary.json``; returns the summary dict.
@@ -245,26 +251,45 @@ class RunLog:
         missing = [key for key in SUMMARY_REQUIRED_KEYS if key not in summary_extra]
         if missing:
             raise ValueError(f"summary.json needs {missing} from the caller")
-        self._close_files()
-        first = self._frame_rows[0] if self._frame_rows else {}
+        try:
+            self._close_files()
+        except OSError:
+            pass  # a CSV could not take its last bytes (a full disk, reported by the writer): its complete rows stay
+        frame_rows = [dict(zip(FRAME_COLUMNS, values)) for values in self._frame_values]
+        selection_states = [{"frame": frame, "element": element, "selected": bool(selected)}
+                            for element, (frames, flags) in self._selection_states.items()
+                            for frame, selected in zip(frames, flags)]
+        first = frame_rows[0] if frame_rows else {}
         summary = {"scene": summary_extra["scene"], "path": summary_extra["path"],
                    "mode": first.get("mode"), "resolution": summary_extra["resolution"],
                    "budget_ms": first.get("budget_ms")}
-        summary.update(summarize(self._frame_rows, self._selection_states))
+        summary.update(summarize(frame_rows, selection_states))
         summary["non_finite_values_dropped"] = self._frames.non_finite + self._selection.non_finite
         summary["machine"] = machine_info()
         summary.update(summary_extra)
         summary = _round_json(_json_safe(summary))
         path = self.run_dir / SUMMARY_JSON
         temporary = path.with_suffix(".json.tmp")
-        temporary.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-        os.replace(temporary, path)
+        try:
+            temporary.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+            os.replace(temporary, path)
+        except OSError:
+            temporary.unlink(missing_ok=True)  # no half-written file is left behind
+            raise
         return summary
 
     def _close_files(self):
+        """Close both CSVs; the first write error (a full disk) is raised after both are closed."""
         self._closed = True
-        self._selection.close()
-        self._frames.close()
+        errors = []
+        for table in (self._selection, self._frames):
+            try:
+                table.close()
+            except OSError as error:
+                errors.append(error)
+                table.abandon()
+        if errors:
+            raise errors[0]
 
     def __enter__(self):
         return self
@@ -360,11 +385,11 @@ def machine_info():
 
 
 def _parse_cell(column, text):
-    if column in _STRING_COLUMNS:
+    if column in STRING_COLUMNS:
         return text
     if text == "":
         return None
-    if column in _BOOL_COLUMNS:
+    if column in BOOL_COLUMNS:
         return text not in ("0", "False", "false")
     try:
         return int(text)
@@ -401,6 +426,95 @@ def output_dir_problem(path):
     if not os.access(existing, os.W_OK | os.X_OK):
         return f"cannot write to output folder '{path}': permission denied on '{existing}'"
     return None
+
+
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+# Scanlines per chunk of each OpenEXR compression (single-part files carry no chunk count).
+_EXR_LINES_PER_CHUNK = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 32, 7: 32, 8: 32, 9: 256}
+
+
+def image_is_complete(path) -> bool:
+    """Whether an image file was written to its end: a PNG ends with its IEND chunk; an
+    OpenEXR file (scanline, single- or multi-part) has every chunk of its offset tables
+    filled in and inside the file.  A writer that hit a full disk or a file-size limit
+    can leave a file that starts well and ends early (Blender reports no error then)."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as handle:
+            if path.suffix.lower() == ".png":
+                if size < 8 + len(PNG_END):
+                    return False
+                handle.seek(size - len(PNG_END))
+                return handle.read() == PNG_END
+            if path.suffix.lower() == ".exr":
+                return _exr_is_complete(handle, size)
+    except (OSError, ValueError, struct.error):
+        return False
+    return size > 0
+
+
+def _exr_is_complete(handle, size) -> bool:
+    if handle.read(4) != EXR_MAGIC:
+        return False
+    flags = struct.unpack("<I", handle.read(4))[0]
+    multipart, tiled = bool(flags & 0x1000), bool(flags & 0x200)
+    if tiled:
+        return size > 8  # not written by Blender's multilayer output; not checked further
+
+    def read_string():
+        data = bytearray()
+        while True:
+            byte = handle.read(1)
+            if not byte:
+                raise ValueError("truncated header")
+            if byte == b"\0":
+                return bytes(data)
+            data += byte
+            if len(data) > 1024:
+                raise ValueError("header name too long")
+
+    headers = []
+    while True:
+        attributes = {}
+        name = read_string()
+        if not name:
+            break  # the empty header ending a multi-part header list
+        while name:
+            kind = read_string()
+            length = struct.unpack("<i", handle.read(4))[0]
+            if length < 0 or length > size:
+                raise ValueError("bad attribute size")
+            attributes[name] = (kind, handle.read(length))
+            name = read_string()
+        headers.append(attributes)
+        if not multipart:
+            break
+    chunk_counts = []
+    for attributes in headers:
+        if b"chunkCount" in attributes:
+            chunk_counts.append(struct.unpack("<i", attributes[b"chunkCount"][1])[0])
+            continue
+        y_min, y_max = struct.unpack("<4i", attributes[b"dataWindow"][1])[1::2]
+        compression = attributes[b"compression"][1][0]
+        lines = _EXR_LINES_PER_CHUNK.get(compression, 1)
+        chunk_counts.append(-(-(y_max - y_min + 1) // lines))
+    leader = 12 if multipart else 8  # (part,) y, packed size
+    for count in chunk_counts:
+        if count <= 0:
+            return False
+        offsets = struct.unpack(f"<{count}Q", handle.read(8 * count))
+        if min(offsets) == 0 or max(offsets) + leader > size:
+            return False
+        last = max(offsets)
+        position = handle.tell()
+        handle.seek(last + leader - 4)
+        packed = struct.unpack("<i", handle.read(4))[0]
+        if packed < 0 or last + leader + packed > size:
+            return False
+        handle.seek(position)
+    return True
 
 
 def read_frames(run_dir):

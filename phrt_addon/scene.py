@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import defaults, rules, schema
+
 LIGHT_KINDS = ("POINT", "SUN", "SPOT", "AREA")
 
 
@@ -37,14 +39,20 @@ class Material:
     alpha: float = 1.0
     emission: tuple = (0.0, 0.0, 0.0)  # colour * strength, linear
     # Optional base-colour texture: (h, w, 4) float32 linear RGBA, row 0 at the
-    # bottom (Blender's pixel order), sampled with the mesh's active UV map.
+    # bottom (Blender's pixel order), sampled with the mesh's active UV map
+    # (``rules.prepare_texture`` / ``rules.sample_texture``).
     texture: np.ndarray | None = None
     texture_key: str | None = None
 
     @property
     def is_transparent(self) -> bool:
-        """Drawn in the transparent layer (blended in raster, refracted when traced)."""
-        return self.transmission > 1e-3 or self.alpha < 0.999
+        """Drawn in the transparent layer (``rules.is_transparent``)."""
+        return rules.is_transparent(self)
+
+    @property
+    def casts_shadow(self) -> bool:
+        """Occludes light in shadow maps and for shadow rays (``rules.casts_shadow``)."""
+        return rules.casts_shadow(self)
 
 
 @dataclass
@@ -60,6 +68,11 @@ class Element:
     shadows: bool = True
     reflections: bool = True
     refractions: bool = True
+
+    @property
+    def is_candidate(self) -> bool:
+        """Tagged with K > 0 (``rules.is_candidate``)."""
+        return rules.is_candidate(self)
 
 
 @dataclass
@@ -171,13 +184,13 @@ class Camera:
 class Settings:
     """Scene.phrt, copied into the snapshot."""
 
-    mode: str = "HYBRID"
-    budget_ms: float = 150.0
-    selection_weight: float = 0.5
-    max_area_fraction: float = 0.40
-    max_bounces: int = 4
+    mode: str = schema.HYBRID
+    budget_ms: float = defaults.BUDGET_MS
+    selection_weight: float = defaults.SELECTION_WEIGHT
+    max_area_fraction: float = defaults.MAX_AREA_FRACTION
+    max_bounces: int = defaults.MAX_BOUNCES
     cost_mode: str = "MEASURED"
-    shadow_map_size: int = 2048
+    shadow_map_size: int = defaults.SHADOW_MAP_SIZE
     budget_at: float | None = None  # set: the budget is this fraction of the way from raster to ray traced
     relevance: str = "PAPER"  # 'PAPER' (equation 3) or 'ERROR' (V x expected benefit, see heuristic.py)
     selection_order: str = "RELEVANCE"  # 'RELEVANCE' (the paper's) or 'RELEVANCE_PER_MS'
@@ -212,7 +225,8 @@ class SceneSnapshot:
         return np.min(lows, axis=0), np.max(highs, axis=0)
 
     def candidate_mask(self) -> np.ndarray:
-        return np.array([e.candidate for e in self.elements], dtype=bool)
+        """Elements that are candidates (tagged, K > 0: ``rules.is_candidate``)."""
+        return np.array([e.is_candidate for e in self.elements], dtype=bool)
 
 
 def transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import rules
+
 MIN_ROUGHNESS = 0.04
 INV_PI = 1.0 / np.pi
 
@@ -89,15 +91,18 @@ class MaterialTable:
             self.ior[index] = material.ior
             self.alpha[index] = material.alpha
             self.emission[index] = material.emission[:3]
-        for array in (self.base_color, self.metallic, self.roughness, self.transmission, self.alpha, self.emission):
-            np.nan_to_num(array, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
-        np.clip(self.base_color, 0.0, 1.0, out=self.base_color)
-        np.clip(self.metallic, 0.0, 1.0, out=self.metallic)
-        np.clip(self.roughness, 0.0, 1.0, out=self.roughness)
-        np.clip(self.transmission, 0.0, 1.0, out=self.transmission)
-        np.clip(self.alpha, 0.0, 1.0, out=self.alpha)
-        self.ior = np.clip(np.nan_to_num(self.ior, nan=1.5), 1.0, 4.0)
+        self.base_color = rules.unit_interval(self.base_color)
+        self.metallic = rules.unit_interval(self.metallic)
+        self.roughness = rules.unit_interval(self.roughness)
+        self.transmission = rules.unit_interval(self.transmission)
+        self.alpha = rules.unit_interval(self.alpha, nan=1.0)
+        self.ior = rules.clamp_ior(self.ior)
+        np.nan_to_num(self.emission, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         np.clip(self.emission, 0.0, 1e6, out=self.emission)
+        # The rules of phrt_addon/rules.py, per material.
+        self.transmissive = rules.transmissive(self.transmission, self.metallic)
+        self.transparent = rules.is_transparent_values(self.transmission, self.metallic, self.alpha)
+        self.casts_shadow = rules.casts_shadow_values(self.transmission, self.metallic, self.alpha)
 
 
 def normalize(vectors):
@@ -117,9 +122,16 @@ def specular_f0(albedo, metallic, ior):
     return dielectric + (albedo - dielectric) * metallic[:, None]
 
 
+def specular_f90(f0):
+    """Reflectance at grazing incidence: 1, fading to 0 for a surface with (almost) no
+    specular reflection at all (F0 below 2%, i.e. IOR below ~1.33; Schlick's 1 at grazing
+    would give an IOR-1 surface, which reflects nothing, a bright rim)."""
+    return np.clip(50.0 * np.mean(f0, axis=-1, keepdims=True), 0.0, 1.0)
+
+
 def fresnel_schlick(f0, cos_theta):
     cos_theta = np.clip(cos_theta, 0.0, 1.0)
-    return f0 + (1.0 - f0) * ((1.0 - cos_theta) ** 5)[:, None]
+    return f0 + (specular_f90(f0) - f0) * ((1.0 - cos_theta) ** 5)[:, None]
 
 
 def fresnel_dielectric(cos_incident, eta):
@@ -127,11 +139,12 @@ def fresnel_dielectric(cos_incident, eta):
     Returns 1 under total internal reflection."""
     cos_i = np.clip(np.abs(cos_incident), 0.0, 1.0)
     sin2_t = (1.0 - cos_i ** 2) / (eta ** 2)
-    total = sin2_t >= 1.0
+    total = sin2_t > 1.0
     cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
     rs = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-30)
     rp = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-30)
-    return np.where(total, 1.0, 0.5 * (rs ** 2 + rp ** 2))
+    # No interface (matching indices) reflects nothing, also at grazing incidence.
+    return np.where(total, 1.0, np.where(np.abs(eta - 1.0) < 1e-12, 0.0, 0.5 * (rs ** 2 + rp ** 2)))
 
 
 def reflect(incident, normal):
@@ -218,7 +231,7 @@ def ambient(surface: SurfaceSamples, world_color):
 
 def environment_fresnel(f0, n_dot_v, roughness):
     """Schlick Fresnel with a roughness-dependent ceiling (rough surfaces reflect less at grazing)."""
-    ceiling = np.maximum(1.0 - roughness, f0.max(axis=-1))[:, None]
+    ceiling = np.minimum(np.maximum(1.0 - roughness, f0.max(axis=-1))[:, None], specular_f90(f0))
     return f0 + (np.maximum(ceiling, f0) - f0) * ((1.0 - np.clip(n_dot_v, 0.0, 1.0)) ** 5)[:, None]
 
 

@@ -3,16 +3,32 @@
 ``TraceScene`` holds the Embree scenes of one replay.  Static geometry is
 uploaded once; an object whose geometry or transform changes moves to the
 per-frame dynamic scenes, and the static scene is rebuilt once without it (so
-an animated door does not re-upload a whole level every frame).  Opaque and
-transparent geometry live in separate scenes: shadow rays only test the opaque
-ones (glass and water do not cast shadows, matching the raster shadow maps),
-radiance rays test both and keep the nearest hit.
+an animated door does not re-upload a whole level every frame).  Geometry that
+casts shadows (``rules.casts_shadow``: the same rule as the shadow maps) and
+geometry that does not live in separate scenes: shadow rays only test the
+casters, radiance rays test both and keep the nearest hit.
 
-Coordinates: Embree works in float32, so every scene is built relative to a
-``trace origin`` (the scene centre when the static scene was built) and ray
-origins are offset along the surface normal by an epsilon proportional to the
-float32 spacing at the point's magnitude (``ray_epsilon``), which keeps shadow
-acne and light leaks away from 1e-3 to 1e5 world units.
+Coordinates: Embree works in float32.  Meshes are grouped into *precision
+clusters* (``precision_clusters``): each cluster is uploaded relative to its own
+origin, chosen so that every mesh in it is represented to a small fraction of its
+own size, and rays are moved into each cluster's frame (in float64) before the
+float32 conversion; distances along a ray do not change with the move.  A level
+around 1e5 with millimetre props, or millimetre props near the origin beside a
+mountain 1e5 units away, keeps its precision.  Secondary-ray origins are offset
+along the *geometric* normal, on the side the ray leaves, by an epsilon proportional
+to the float32 spacing at the point's magnitude in its cluster (``ray_epsilon``),
+which keeps shadow acne and light leaks away from 1e-3 to 1e5 world units (the
+interpolated shading normal of a coarse smooth mesh can point below the surface).
+
+Bounces (``Settings.max_bounces``): a bounce is a reflection or refraction ray,
+which changes the ray's direction.  Rays from the G-buffer are bounce 1 (with
+``max_bounces`` 0 nothing is reflected or refracted by the tracer); a hit of bounce
+k may bounce again while k < max_bounces.  Out of bounces, a reflection sees the
+environment (the raster's stand-in) and light through a transmissive surface goes
+straight on, unbent (the raster's blended transparency).  A total internal
+reflection costs ``TIR_BOUNCE_COST`` of a bounce.  Light passing straight through
+a surface (its 1 - alpha part, or a transmissive one out of bounces) is not a
+bounce; at most ``MAX_PASS_THROUGH`` surfaces are passed through per path.
 
 Rays are split over a thread pool (embreex releases the GIL).
 ``embreex`` is imported lazily: a raster frame never imports it.
@@ -26,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import shading
+from . import rules, shading
 from .scene import normal_matrix, transform_points
 
 # Rays per chunk when splitting over threads; below this a single call is cheaper.
@@ -34,12 +50,20 @@ PARALLEL_CHUNK = 16384
 # Relative float32 spacing multiplier for secondary-ray offsets.
 EPSILON_ULPS = 64.0
 FLOAT32_EPS = float(np.finfo(np.float32).eps)
+# A mesh is uploaded relative to a cluster origin at most this many times its own size away
+# (float32 then keeps it to ~1e-3 of its size); at most MAX_CLUSTERS clusters per scene.
+PRECISION_RATIO = 1e4
+MAX_CLUSTERS = 8
 # Reflections are traced on surfaces up to this roughness (a single mirror-direction
 # ray, blended towards the environment as roughness grows; see ``reflection_blend``).
 ROUGHNESS_LIMIT = 0.5
 # A total internal reflection costs this fraction of a bounce: it does not branch, and light that
 # enters a glass block through a side face needs a few of them to get out.
 TIR_BOUNCE_COST = 0.25
+# Surfaces a path may pass straight through (alpha cards, glass out of bounces).
+MAX_PASS_THROUGH = 16
+# Secondary directions are kept at least this cosine away from the geometric surface.
+MIN_LEAVING_COSINE = 1e-4
 MISS = -1
 
 
@@ -47,18 +71,21 @@ def worker_count() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
 
-def ray_epsilon(points: np.ndarray, scene_extent: float, view_distance=None) -> np.ndarray:
+def ray_epsilon(points: np.ndarray, scene_extent, view_distance=None) -> np.ndarray:
     """Offset for secondary-ray origins: many float32 ulps of the point's magnitude,
     with a floor relative to the scene size (works from 1e-3 to 1e5 units).
 
-    ``view_distance`` (optional, per point): how far the ray that found the point travelled,
-    from the camera for a G-buffer position or from the ray origin for a hit.  Such a point
-    carries float32 error of that size, which in a telephoto view of a small scene is far above
-    the point's own magnitude (shadow acne without it)."""
+    ``points`` are in the frame Embree sees them in (a cluster's); ``scene_extent`` is
+    that cluster's size (a number or one per point).  ``view_distance`` (optional, per
+    point): how far the ray that found the point travelled, from the camera for a
+    G-buffer position or from the ray origin for a hit.  Such a point carries float32
+    error of that size, which in a telephoto view of a small scene is far above the
+    point's own magnitude (shadow acne without it)."""
     magnitude = np.max(np.abs(points), axis=-1)
     if view_distance is not None:
         magnitude = np.maximum(magnitude, np.nan_to_num(np.asarray(view_distance, np.float64), posinf=0.0))
-    return EPSILON_ULPS * FLOAT32_EPS * (magnitude + 1e-3 * scene_extent) + 1e-7 * scene_extent
+    extent = np.asarray(scene_extent, dtype=np.float64)
+    return EPSILON_ULPS * FLOAT32_EPS * (magnitude + 1e-3 * extent) + 1e-7 * extent
 
 
 def reflection_blend(roughness):
@@ -67,26 +94,81 @@ def reflection_blend(roughness):
     return np.clip(1.0 - np.asarray(roughness) / ROUGHNESS_LIMIT, 0.0, 1.0) ** 2
 
 
+def leave_surface(directions, geometric_normal, side=1.0):
+    """``directions`` bent just enough to leave the geometric surface on ``side`` (+1: the side
+    ``geometric_normal`` points to, -1: the other).  A mirror direction about an interpolated
+    normal can point into the surface on coarse smooth meshes; Embree would then hit the
+    surface itself."""
+    normal = geometric_normal * side
+    along = shading.dot(directions, normal)
+    wrong = along < MIN_LEAVING_COSINE
+    if not np.any(wrong):
+        return directions
+    fixed = directions.copy()
+    fixed[wrong] += (MIN_LEAVING_COSINE - along[wrong])[:, None] * normal[wrong]
+    fixed[wrong] = shading.normalize(fixed[wrong])
+    return fixed
+
+
+def precision_clusters(lows, highs):
+    """Group meshes (world bounds ``lows``, ``highs``: (n, 3)) so that each is within
+    ``PRECISION_RATIO`` times its own size of its cluster's origin.  Smallest meshes first
+    (they need the most precision); a mesh joins the first cluster whose origin is close
+    enough for both it and the cluster's smallest mesh, else starts a cluster at its centre
+    (past MAX_CLUSTERS it joins the nearest).  Returns (origins (k, 3), extents (k,),
+    cluster of each mesh (n,))."""
+    lows, highs = np.asarray(lows, np.float64).reshape(-1, 3), np.asarray(highs, np.float64).reshape(-1, 3)
+    n = len(lows)
+    if n == 0:
+        return np.zeros((1, 3)), np.ones(1), np.zeros(0, np.int64)
+    centres = (lows + highs) / 2.0
+    sizes = np.max(highs - lows, axis=1)
+    sizes = np.maximum(sizes, 1e-9 * np.max(np.abs(centres), axis=1) + 1e-12)
+    origins, smallest, assignment = [], [], np.zeros(n, np.int64)
+    for index in np.argsort(sizes, kind="stable"):
+        chosen = None
+        for cluster, origin in enumerate(origins):
+            reach = np.max(np.abs(centres[index] - origin)) + sizes[index] / 2.0
+            if reach <= PRECISION_RATIO * min(sizes[index], smallest[cluster]):
+                chosen = cluster
+                break
+        if chosen is None:
+            if len(origins) < MAX_CLUSTERS:
+                origins.append(centres[index].copy())
+                smallest.append(sizes[index])
+                chosen = len(origins) - 1
+            else:
+                chosen = int(np.argmin([np.max(np.abs(centres[index] - o)) for o in origins]))
+        assignment[index] = chosen
+    origins = np.array(origins)
+    extents = np.array([float(np.max(highs[assignment == c].max(axis=0) - lows[assignment == c].min(axis=0)))
+                        for c in range(len(origins))])
+    return origins, np.maximum(extents, 1e-12), assignment
+
+
 @dataclass
 class _Geometry:
-    """Per-Embree-geometry data for shading hits (trace-frame coordinates)."""
+    """Per-Embree-geometry data for shading hits (vertices in their cluster's frame)."""
 
     mesh_name: str
-    vertices: np.ndarray  # (V,3) float32
+    vertices: np.ndarray  # (V,3) float32, relative to the cluster origin
     triangles: np.ndarray  # (T,3) int32
     corner_normals: np.ndarray  # (T*3,3) float32 world
-    corner_uvs: np.ndarray | None
+    corner_uvs: np.ndarray  # (T*3,2) float32, finite (rules.texture_coordinates)
     tri_material: np.ndarray
     tri_element: np.ndarray
 
 
 class _EmbreeSet:
-    """One Embree scene and the geometry table behind its geomIDs."""
+    """One Embree scene and the geometry table behind its geomIDs, in a cluster's frame."""
 
-    def __init__(self, entries):
+    def __init__(self, entries, casts_shadow: bool, offset, extent):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
+        self.casts_shadow = casts_shadow
+        self.offset = np.asarray(offset, np.float64)  # cluster origin in the trace frame
+        self.extent = float(extent)
         self.geometries = []
         self.scene = rtcore_scene.EmbreeScene()
         for geometry in entries:
@@ -98,6 +180,10 @@ class _EmbreeSet:
         if not self.empty:
             # Commit now (embreex commits on the first run) so the build is timed as upload.
             self.scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
+
+    def local(self, origins):
+        """Trace-frame ray origins (float64) in this set's frame, as Embree's float32."""
+        return np.ascontiguousarray(np.asarray(origins, np.float64) - self.offset, dtype=np.float32)
 
 
 class TraceScene:
@@ -112,24 +198,35 @@ class TraceScene:
         self._dynamic_names = set()
         self._static = []
         self._dynamic = []
-        self.stats = {"upload_ms": 0.0, "static_builds": 0, "static_triangles": 0, "dynamic_triangles": 0}
+        self._element_set = np.full(1, -1, np.int64)  # element + 1 -> index into sets() (its cluster's frame)
+        self.stats = {"upload_ms": 0.0, "static_builds": 0, "static_triangles": 0, "dynamic_triangles": 0,
+                      "clusters": 0}
 
     def close(self):
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
+        self._static, self._dynamic = [], []
+
+    def sets(self):
+        return self._static + self._dynamic
 
     # -- geometry -----------------------------------------------------------
-    def _entry(self, mesh):
-        world = transform_points(mesh.matrix_world, mesh.positions) - self.origin
+    def _entry(self, mesh, cluster_origin):
+        world = transform_points(mesh.matrix_world, mesh.positions) - cluster_origin
         normals = np.asarray(mesh.corner_normals, dtype=np.float64) @ normal_matrix(mesh.matrix_world).T
         return _Geometry(mesh.name, world.astype(np.float32), np.ascontiguousarray(mesh.triangles, dtype=np.int32),
-                         shading.normalize(normals).astype(np.float32), mesh.corner_uvs,
+                         shading.normalize(normals).astype(np.float32),
+                         rules.texture_coordinates(mesh.corner_uvs, 3 * mesh.n_triangles),
                          mesh.tri_material, mesh.tri_element)
 
-    def update(self, snapshot, transparent_materials: np.ndarray):
-        """Bring the Embree scenes in line with the snapshot; returns upload ms of this frame."""
+    def update(self, snapshot, casts_shadow=None):
+        """Bring the Embree scenes in line with the snapshot; returns upload ms of this frame.
+        ``casts_shadow``: per material (default: ``rules.casts_shadow`` of each)."""
         start = time.perf_counter()
+        if casts_shadow is None:
+            casts_shadow = np.array([rules.casts_shadow(m) for m in snapshot.materials], bool)
+        casts_shadow = np.asarray(casts_shadow, bool)
         state = {m.name: (m.geometry_key, np.asarray(m.matrix_world, np.float64).tobytes())
                  for m in snapshot.meshes if m.n_triangles}
         changed = {name for name, value in state.items()
@@ -137,8 +234,7 @@ class TraceScene:
         removed = set(self._static_state) - set(state)
         if self._static_state and not set(self._static_state) - changed - removed:
             # Nothing of the static scene is left (another file with the same object names, or
-            # everything moved): start over, centred on the new geometry, so that a scene far from
-            # the old origin keeps its float32 precision and a fitting ray epsilon.
+            # everything moved): start over, centred on the new geometry.
             self.origin = None
             self._static_state, self._dynamic_names, self._static = {}, set(), []
             changed, removed = set(), set()
@@ -152,37 +248,80 @@ class TraceScene:
         if rebuild_static:
             self._static_state = {name: value for name, value in state.items() if name not in self._dynamic_names}
             static_meshes = [m for m in snapshot.meshes if m.name in self._static_state]
-            self._static = self._build_sets(static_meshes, transparent_materials)
+            self._static = self._build_sets(static_meshes, casts_shadow)
             self.stats["static_builds"] += 1
             self.stats["static_triangles"] = sum(m.n_triangles for m in static_meshes)
         # New objects that appear after the static build and moving objects are dynamic.
         dynamic_meshes = [m for m in snapshot.meshes if m.n_triangles and m.name not in self._static_state]
-        self._dynamic = self._build_sets(dynamic_meshes, transparent_materials) if dynamic_meshes else []
+        self._dynamic = self._build_sets(dynamic_meshes, casts_shadow) if dynamic_meshes else []
         self.stats["dynamic_triangles"] = sum(m.n_triangles for m in dynamic_meshes)
+        # Element -> the set (cluster frame) its triangles are in, as an array indexed by element + 1.
+        pairs = [(int(element), set_index) for set_index, embree_set in enumerate(self.sets())
+                 for geometry in embree_set.geometries for element in np.unique(geometry.tri_element).tolist()]
+        lookup = np.full(max([element for element, _ in pairs] + [-1]) + 2, -1, np.int64)
+        for element, set_index in reversed(pairs):  # the first set holding the element wins
+            lookup[element + 1] = set_index
+        self._element_set = lookup
         elapsed = (time.perf_counter() - start) * 1000.0
         self.stats["upload_ms"] = elapsed
         return elapsed
 
-    def _build_sets(self, meshes, transparent_materials):
-        opaque, transparent = [], []
-        for mesh in meshes:
-            entry = self._entry(mesh)
-            is_transparent = transparent_materials[entry.tri_material] if len(transparent_materials) else \
-                np.zeros(len(entry.triangles), bool)
-            for target, mask in ((opaque, ~is_transparent), (transparent, is_transparent)):
-                if np.all(mask):
-                    target.append(entry)
-                elif np.any(mask):
-                    keep = np.flatnonzero(mask)
-                    corners = (keep[:, None] * 3 + np.arange(3)).ravel()
-                    target.append(_Geometry(entry.mesh_name, entry.vertices, entry.triangles[keep],
-                                            entry.corner_normals[corners],
-                                            None if entry.corner_uvs is None else entry.corner_uvs[corners],
-                                            entry.tri_material[keep], entry.tri_element[keep]))
-        return [("opaque", _EmbreeSet(opaque)), ("transparent", _EmbreeSet(transparent))]
+    def _build_sets(self, meshes, casts_shadow):
+        meshes = [m for m in meshes if m.n_triangles]
+        if not meshes:
+            return []
+        bounds = [(world.min(axis=0), world.max(axis=0)) for world in (m.world_positions() for m in meshes)]
+        origins, extents, assignment = precision_clusters([b[0] for b in bounds], [b[1] for b in bounds])
+        self.stats["clusters"] = len(origins)
+        sets = []
+        for cluster, cluster_origin in enumerate(origins):
+            casters, others = [], []
+            for mesh in (m for m, c in zip(meshes, assignment) if c == cluster):
+                entry = self._entry(mesh, cluster_origin)
+                caster = casts_shadow[entry.tri_material] if len(casts_shadow) else \
+                    np.ones(len(entry.triangles), bool)
+                for target, mask in ((casters, caster), (others, ~caster)):
+                    if np.all(mask):
+                        target.append(entry)
+                    elif np.any(mask):
+                        keep = np.flatnonzero(mask)
+                        corners = (keep[:, None] * 3 + np.arange(3)).ravel()
+                        target.append(_Geometry(entry.mesh_name, entry.vertices, entry.triangles[keep],
+                                                entry.corner_normals[corners], entry.corner_uvs[corners],
+                                                entry.tri_material[keep], entry.tri_element[keep]))
+            offset = cluster_origin - self.origin
+            for flag, entries in ((True, casters), (False, others)):
+                if entries:
+                    sets.append(_EmbreeSet(entries, flag, offset, extents[cluster]))
+        return sets
 
     def to_trace(self, world_points):
         return np.asarray(world_points, dtype=np.float64) - self.origin
+
+    # -- ray offsets ----------------------------------------------------------
+    def epsilon(self, points_trace, view_distance=None, set_index=None, element=None) -> np.ndarray:
+        """``ray_epsilon`` of trace-frame points in the frame of the cluster they lie in: given
+        by the set of a hit (``set_index``) or the element of a G-buffer pixel (``element``),
+        else the nearest cluster origin."""
+        points_trace = np.asarray(points_trace, np.float64).reshape(-1, 3)
+        sets = self.sets()
+        if not sets:
+            return ray_epsilon(points_trace, self.extent, view_distance)
+        offsets = np.array([s.offset for s in sets])
+        extents = np.array([s.extent for s in sets])
+        if set_index is None and element is not None:
+            element = np.asarray(element, np.int64) + 1
+            known = (element >= 0) & (element < len(self._element_set))
+            set_index = np.where(known, self._element_set[np.where(known, element, 0)], -1)
+        if set_index is None:
+            set_index = np.full(len(points_trace), -1, np.int64)
+        set_index = np.asarray(set_index, np.int64).copy()
+        unknown = set_index < 0
+        if np.any(unknown):
+            distance = np.max(np.abs(points_trace[unknown][:, None, :] - offsets[None, :, :]), axis=2)
+            set_index[unknown] = np.argmin(distance, axis=1)
+        local = points_trace - offsets[set_index]
+        return ray_epsilon(local, extents[set_index], view_distance)
 
     # -- queries ------------------------------------------------------------
     def _run(self, scene, origins, directions, **kwargs):
@@ -200,39 +339,40 @@ class TraceScene:
         return np.concatenate(parts)
 
     def occluded(self, origins, directions, max_distance) -> np.ndarray:
-        """True where an opaque surface lies within ``max_distance`` (trace-frame rays)."""
-        origins = np.ascontiguousarray(origins, dtype=np.float32)
+        """True where a shadow caster lies within ``max_distance`` (trace-frame rays)."""
+        origins = np.asarray(origins, dtype=np.float64)
         directions = np.ascontiguousarray(directions, dtype=np.float32)
         result = np.zeros(len(origins), bool)
         if len(origins) == 0:
             return result
         dists = np.minimum(np.nan_to_num(max_distance, nan=0.0, posinf=1e30), 1e30).astype(np.float32)
-        for kind, embree_set in self._static + self._dynamic:
-            if kind != "opaque" or embree_set.empty:
+        for embree_set in self.sets():
+            if not embree_set.casts_shadow or embree_set.empty:
                 continue
             if not np.any(result):  # no ray blocked yet: no gather copies (most calls end here)
-                hits = self._run(embree_set.scene, origins, directions, dists=dists.copy(), query="OCCLUDED")
+                hits = self._run(embree_set.scene, embree_set.local(origins), directions, dists=dists.copy(),
+                                 query="OCCLUDED")
                 result |= np.asarray(hits) != MISS
                 continue
             todo = np.flatnonzero(~result)
             if len(todo) == 0:
                 break
-            hits = self._run(embree_set.scene, origins[todo], directions[todo], dists=dists[todo].copy(),
-                             query="OCCLUDED")
+            hits = self._run(embree_set.scene, embree_set.local(origins[todo]), directions[todo],
+                             dists=dists[todo].copy(), query="OCCLUDED")
             result[todo[np.asarray(hits) != MISS]] = True
         return result
 
     def intersect(self, origins, directions):
         """Nearest hit over all scenes: dict with t (inf on miss), set index, geometry, prim, u, v, Ng."""
-        origins = np.ascontiguousarray(origins, dtype=np.float32)
+        origins = np.asarray(origins, dtype=np.float64)
         directions = np.ascontiguousarray(directions, dtype=np.float32)
         n = len(origins)
         best = None
-        sets = self._static + self._dynamic
-        for index, (_, embree_set) in enumerate(sets):
+        sets = self.sets()
+        for index, embree_set in enumerate(sets):
             if embree_set.empty or n == 0:
                 continue
-            out = self._run(embree_set.scene, origins, directions, output=1)
+            out = self._run(embree_set.scene, embree_set.local(origins), directions, output=1)
             if best is None:
                 # The first set's arrays are taken as they are (Embree leaves prim -1 and u, v, Ng 0
                 # on a miss): a whole-array np.where per field cost ~15% of the Embree time.
@@ -255,14 +395,13 @@ class TraceScene:
         return best
 
     def hit_surfaces(self, hits, mask):
-        """Shading attributes of the hits selected by ``mask``: material, element, shading and
-        geometric normals (unit, outward as authored), uv."""
+        """Shading attributes of the hits selected by ``mask``: indices, material, element, shading
+        and geometric normals (unit, outward as authored), uv and the set index of each hit."""
         indices = np.flatnonzero(mask)
         material = np.zeros(len(indices), np.int64)
         element = np.full(len(indices), -1, np.int64)
         normal = np.zeros((len(indices), 3))
         uv = np.zeros((len(indices), 2))
-        has_uv = np.zeros(len(indices), bool)
         sets = hits["sets"]
         set_index = hits["set"][indices]
         geom_index = hits["geom"][indices]
@@ -271,7 +410,7 @@ class TraceScene:
         v = hits["v"][indices].astype(np.float64)
         barycentric = np.stack([1.0 - u - v, u, v], axis=1)
         for s in np.unique(set_index):
-            embree_set = sets[s][1]
+            embree_set = sets[s]
             in_set = set_index == s
             for g in np.unique(geom_index[in_set]):
                 chosen = np.flatnonzero(in_set & (geom_index == g))
@@ -281,9 +420,7 @@ class TraceScene:
                 element[chosen] = geometry.tri_element[triangles]
                 corners = triangles[:, None] * 3 + np.arange(3)
                 normal[chosen] = np.einsum("nk,nkc->nc", barycentric[chosen], geometry.corner_normals[corners])
-                if geometry.corner_uvs is not None:
-                    uv[chosen] = np.einsum("nk,nkc->nc", barycentric[chosen], geometry.corner_uvs[corners])
-                    has_uv[chosen] = True
+                uv[chosen] = np.einsum("nk,nkc->nc", barycentric[chosen], geometry.corner_uvs[corners])
         geometric = shading.normalize(hits["Ng"][indices].astype(np.float64))
         normal = shading.normalize(normal)
         degenerate = np.linalg.norm(normal, axis=1) < 0.5
@@ -291,7 +428,7 @@ class TraceScene:
         # Orient the geometric normal like the authored (outward) shading normal.
         flip = np.sum(geometric * normal, axis=1) < 0
         geometric[flip] *= -1.0
-        return indices, material, element, normal, geometric, uv, has_uv
+        return indices, material, element, normal, geometric, uv, set_index
 
 
 class RadianceTracer:
@@ -303,72 +440,85 @@ class RadianceTracer:
         self.materials = materials
         self.textures = textures or {}
         self.world = np.asarray(snapshot.world_color, dtype=np.float64)
-        self.max_bounces = int(snapshot.settings.max_bounces)
+        self.max_bounces = max(int(snapshot.settings.max_bounces), 0)
         self.rays = 0
         self.shadow_rays = 0
 
-    def _albedo(self, material, uv, has_uv):
+    def _albedo(self, material, uv):
         albedo = self.materials.base_color[material].copy()
         for index in np.unique(material):
             texture = self.textures.get(int(index))
             if texture is None:
                 continue
-            chosen = (material == index) & has_uv
-            if np.any(chosen):
-                albedo[chosen] *= sample_texture(texture, uv[chosen])[:, :3]
+            chosen = material == index
+            albedo[chosen] *= rules.sample_texture(texture, uv[chosen])[:, :3]
         return albedo
 
-    def direct(self, points_trace, surface: shading.SurfaceSamples, view_distance=None):
-        """Direct light with traced shadows at trace-frame points (``view_distance``: see ray_epsilon)."""
+    def direct(self, points_trace, surface: shading.SurfaceSamples, view_distance=None, offset_normal=None,
+               eps=None):
+        """Direct light with traced shadows at trace-frame points.  Shadow rays start ``eps``
+        (default: ``TraceScene.epsilon`` with ``view_distance``) along ``offset_normal`` (the
+        geometric normal on the lit side; default: the shading normal)."""
         total = np.zeros((len(points_trace), 3))
         if len(points_trace) == 0:
             return total
         origin_world = self.scene.origin
-        eps = ray_epsilon(points_trace, self.scene.extent, view_distance)
+        if eps is None:
+            eps = self.scene.epsilon(points_trace, view_distance)
+        offset_normal = surface.normal if offset_normal is None else offset_normal
         for light in self.snapshot.lights:
             direction, distance, irradiance = shading.light_incidence(light, points_trace, origin_world)
             contribution = shading.brdf_cosine(surface, direction) * irradiance
             lit = np.any(contribution > 0, axis=1)
             if light.cast_shadows and np.any(lit):
                 idx = np.flatnonzero(lit)
-                start = points_trace[idx] + surface.normal[idx] * eps[idx, None]
+                start = points_trace[idx] + offset_normal[idx] * eps[idx, None]
                 blocked = self.scene.occluded(start, direction[idx], distance[idx] - 2 * eps[idx])
                 self.shadow_rays += len(idx)
                 contribution[idx[blocked]] = 0.0
             total += contribution
         return total
 
-    def radiance(self, origins, directions, depth):
-        """Radiance arriving along trace-frame rays (N,3); ``depth``: the bounces so far,
-        a number or one per ray."""
+    def radiance(self, origins, directions, depth, passed=0):
+        """Radiance arriving along trace-frame rays (N,3).  ``depth``: the bounces this ray has
+        taken (0 for a camera ray, 1 for a ray leaving the G-buffer), a number or one per ray;
+        ``passed``: the surfaces its path has passed straight through."""
         n = len(origins)
         depth = np.broadcast_to(np.asarray(depth, dtype=np.float64), (n,))
+        passed = np.broadcast_to(np.asarray(passed, dtype=np.int64), (n,))
         result = np.broadcast_to(self.world, (n, 3)).copy()
         if n == 0:
             return result
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = shading.normalize(np.nan_to_num(np.asarray(directions, dtype=np.float64)))
         self.rays += n
         hits = self.scene.intersect(origins, directions)
         hit_mask = np.isfinite(hits["t"]) & (hits["geom"] >= 0)
         if not np.any(hit_mask):
             return result
-        idx, material, _, normal, geometric, uv, has_uv = self.scene.hit_surfaces(hits, hit_mask)
-        dirs = directions[idx].astype(np.float64)
-        points = origins[idx].astype(np.float64) + dirs * hits["t"][idx][:, None]
+        idx, material, _, normal, geometric, uv, set_index = self.scene.hit_surfaces(hits, hit_mask)
+        dirs = directions[idx]
+        points = origins[idx] + dirs * hits["t"][idx][:, None]
+        # A degenerate triangle has no geometric normal: use the shading normal, else the ray.
+        no_geometric = np.linalg.norm(geometric, axis=1) < 0.5
+        geometric[no_geometric] = normal[no_geometric]
+        still = np.linalg.norm(geometric, axis=1) < 0.5
+        geometric[still] = -dirs[still]
         # Which side: the ray arrives from outside where it opposes the outward normal.
         entering = np.sum(geometric * dirs, axis=1) < 0
         facing = np.where(entering[:, None], normal, -normal)
         geometric_facing = np.where(entering[:, None], geometric, -geometric)
         m = self.materials
         surface = shading.SurfaceSamples(
-            position=points, normal=facing, view=-dirs, albedo=self._albedo(material, uv, has_uv),
+            position=points, normal=facing, view=-dirs, albedo=self._albedo(material, uv),
             metallic=m.metallic[material], roughness=m.roughness[material],
             transmission=m.transmission[material], ior=m.ior[material], emission=m.emission[material])
         travelled = hits["t"][idx]
-        color = surface.emission + self.direct(points, surface, travelled)
+        eps = self.scene.epsilon(points, travelled, set_index=set_index)
+        color = surface.emission + self.direct(points, surface, offset_normal=geometric_facing, eps=eps)
         diffuse_ambient, env_fresnel = shading.ambient(surface, self.world)
         color += diffuse_ambient
-        transmissive = surface.transmission * (1.0 - surface.metallic)
-        eps = ray_epsilon(points, self.scene.extent, travelled)
+        transmissive = m.transmissive[material]
         # Dielectric Fresnel for the transmissive part (exact, with total internal reflection).
         eta = np.where(entering, 1.0 / surface.ior, surface.ior)
         cos_i = np.clip(np.sum(-dirs * facing, axis=1), 0.0, 1.0)
@@ -376,8 +526,9 @@ class RadianceTracer:
         reflect_weight = env_fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
         blend = reflection_blend(surface.roughness)
         depth = depth[idx]
+        passed = passed[idx]
         can_bounce = depth < self.max_bounces
-        transmits = transmissive > 1e-3
+        transmits = transmissive > rules.TRANSPARENT_EPSILON
         # Total internal reflection: nothing is refracted, and the bounce costs only
         # TIR_BOUNCE_COST, so light entering a glass side face can get out again.
         total_internal = transmits & (fresnel_t >= 1.0)
@@ -386,33 +537,36 @@ class RadianceTracer:
         trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02)
         if np.any(trace_reflection):
             r = np.flatnonzero(trace_reflection)
-            direction = shading.reflect(dirs[r], facing[r])
+            direction = leave_surface(shading.reflect(dirs[r], facing[r]), geometric_facing[r])
             start = points[r] + geometric_facing[r] * eps[r, None]
-            traced = self.radiance(start, direction, next_depth[r])
+            traced = self.radiance(start, direction, next_depth[r], passed[r])
             reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
         color += reflect_weight * reflected
         refracts = transmits & ~total_internal
+        tint = np.where(entering[:, None], surface.albedo, 1.0)
         trace_refraction = can_bounce & refracts
         if np.any(trace_refraction):
             t = np.flatnonzero(trace_refraction)
             direction, _ = shading.refract(dirs[t], facing[t], eta[t])
+            direction = leave_surface(direction, geometric_facing[t], side=-1.0)
             start = points[t] - geometric_facing[t] * eps[t, None]
-            through = self.radiance(start, direction, next_depth[t])
-            tint = np.where(entering[t, None], surface.albedo[t], 1.0)
-            weight = (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint
+            through = self.radiance(start, direction, next_depth[t], passed[t])
+            weight = (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint[t]
             color[t] += weight * through
-        out_of_bounces = refracts & ~can_bounce
-        if np.any(out_of_bounces):
-            # Out of bounces inside glass: the environment is the best guess.
-            o = np.flatnonzero(out_of_bounces)
-            color[o] += (transmissive[o] * (1.0 - fresnel_t[o]))[:, None] * self.world
+        # Straight on, unbent: the 1 - alpha part of the surface, and the transmitted part of a
+        # transmissive surface out of bounces (the raster's blended transparency).
+        alpha = m.alpha[material][:, None]
+        straight_weight = (1.0 - alpha) + alpha * np.where(
+            (refracts & ~can_bounce)[:, None], (transmissive * (1.0 - fresnel_t))[:, None] * tint, 0.0)
+        color *= alpha
+        straight = np.flatnonzero(straight_weight.max(axis=1) > 0)
+        if len(straight):
+            behind = np.broadcast_to(self.world, (len(straight), 3)).copy()
+            more = passed[straight] < MAX_PASS_THROUGH
+            if np.any(more):
+                s = straight[more]
+                start = points[s] - geometric_facing[s] * eps[s, None]
+                behind[more] = self.radiance(start, dirs[s], depth[s], passed[s] + 1)
+            color[straight] += straight_weight[straight] * behind
         result[idx] = shading.finite(color)
         return result
-
-
-def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Nearest-texel lookup with wrap-around; texture rows start at the bottom (v = 0)."""
-    height, width = texture.shape[:2]
-    x = np.mod(np.floor(uv[:, 0] * width), width).astype(np.int64)
-    y = np.mod(np.floor(uv[:, 1] * height), height).astype(np.int64)
-    return texture[y, x]

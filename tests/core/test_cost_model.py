@@ -10,8 +10,8 @@ import pytest
 
 from phrt.phrt_addon import heuristic
 from phrt.phrt_addon.cost_model import (
-    EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, CostModel, FrameStats, RobustEstimate,
-    normalise_cost_mode,
+    EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats,
+    RobustEstimate, normalise_cost_mode,
 )
 
 TRUE_MS_PER_RAY = np.array([1e-4, 4e-4, 6e-4])  # shadows, reflections, refractions
@@ -102,7 +102,19 @@ def test_estimate_ignores_a_single_outlier_once_warm():
     assert estimate.value == pytest.approx(10.0)
 
 
-def test_estimate_follows_a_step_after_confirm_frames_without_overshoot():
+def test_estimate_follows_a_step_down_after_confirm_frames_without_overshoot():
+    estimate = RobustEstimate(1.0, confirm=3)
+    for _ in range(8):
+        estimate.update(20.0)
+    values = []
+    for _ in range(6):
+        estimate.update(2.0)
+        values.append(estimate.value)
+    assert values[:2] == [pytest.approx(20.0)] * 2
+    assert values[2:] == [pytest.approx(2.0)] * 4
+
+
+def test_estimate_follows_a_step_up_after_two_frames_so_at_most_two_frames_run_over():
     estimate = RobustEstimate(1.0, confirm=3)
     for _ in range(8):
         estimate.update(2.0)
@@ -110,8 +122,17 @@ def test_estimate_follows_a_step_after_confirm_frames_without_overshoot():
     for _ in range(6):
         estimate.update(20.0)
         values.append(estimate.value)
-    assert values[:2] == [pytest.approx(2.0)] * 2
-    assert values[2:] == [pytest.approx(20.0)] * 4
+    assert values[:1] == [pytest.approx(2.0)]
+    assert values[1:] == [pytest.approx(20.0)] * 5
+
+
+def test_estimate_needs_consecutive_outliers_on_one_side():
+    estimate = RobustEstimate(1.0, confirm=3)
+    for _ in range(8):
+        estimate.update(10.0)
+    for measured in (100.0, 1.0, 100.0, 1.0, 100.0):  # alternating outliers are not a step
+        estimate.update(measured)
+        assert estimate.value == pytest.approx(10.0)
 
 
 def test_estimate_smooths_noise_inside_the_gate():
@@ -185,8 +206,13 @@ def _one_element_frame(**overrides):
 
 def test_measured_prediction_is_pixels_times_rays_times_cost_per_ray_times_q():
     elements = _one_element_frame(rt_cost=np.array([3.0]))
-    predicted = CostModel().predict_element_ms(elements, np.array([0.5]), "MEASURED")
-    assert predicted[0] == pytest.approx(1000 * 2.0 * MS_PER_RAY_PRIOR["reflections"] * 3.0)
+    model = CostModel()
+    predicted = model.predict_element_ms(elements, np.array([0.5]), "MEASURED")
+    # Never measured: the prior with the margin of a first guess.
+    assert predicted[0] == pytest.approx(1000 * 2.0 * MS_PER_RAY_PRIOR["reflections"] * 3.0 * UNMEASURED_MARGIN)
+    model.observe(FrameStats(trace_ms=1.0, effect_ms={"reflections": 1.0}, effect_rays={"reflections": 2500.0}))
+    predicted = model.predict_element_ms(elements, np.array([0.5]), "MEASURED")
+    assert predicted[0] == pytest.approx(1000 * 2.0 * (1.0 / 2500.0) * 3.0)
 
 
 def test_paper_prediction_is_the_fitted_factor_times_c():

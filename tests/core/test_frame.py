@@ -49,7 +49,7 @@ def ray_cast_gbuffer(snapshot) -> GBuffer:
     """The opaque layer by primary rays (what the GPU rasterizes), positions relative to the camera."""
     scene = TraceScene(threads=1)
     try:
-        scene.update(snapshot, np.zeros(len(snapshot.materials), bool))
+        scene.update(snapshot)
         origins, directions = snapshot.camera.pixel_rays()
         origins = origins.reshape(-1, 3)
         directions = directions.reshape(-1, 3)

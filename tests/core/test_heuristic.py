@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
-from phrt.phrt_addon import defaults, heuristic
+from phrt.phrt_addon import defaults, heuristic, runlog
 from phrt.phrt_addon.cost_model import CostModel
 from phrt.phrt_addon.heuristic import FrameElements, SelectionSettings, select
+
+from hysteresis import hysteresis_margin
 
 FRAME_PX = 1000
 PROPERTY_SETTINGS = settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -178,7 +180,7 @@ def test_hysteresis_margin_is_the_relevance_gap_to_the_other_state_and_is_tight(
         return select(elements, previous, hybrid(selection_weight=0.6), time_left_ms=1, element_ms=np.ones(2))
     steady = run(2.0, {"e0"})
     assert steady.selected.tolist() == [True, False] and steady.S.tolist() == [True, False]
-    np.testing.assert_allclose(heuristic.hysteresis_margin(steady), [0.1, 0.1])
+    np.testing.assert_allclose(hysteresis_margin(steady), [0.1, 0.1])
     assert run(1 / 0.41, steady).selected.tolist() == [True, False]  # V 0.5 -> 0.41: kept
     assert run(1 / 0.39, steady).selected.tolist() == [False, True]  # V 0.5 -> 0.39: lost
 
@@ -253,18 +255,12 @@ def test_rows_have_the_contract_columns_in_order():
     assert result.columns(frame=12)["reason"] == ["", "not_visible"]
 
 
-def test_selection_flips_per_element_per_100_frames():
-    history = [{"a"}, {"a", "b"}, {"b"}, {"b"}, {"a", "b"}]  # 4 transitions
-    flips = heuristic.selection_flips(history, names=["a", "b", "c"])
-    assert flips == {"a": 50.0, "b": 25.0, "c": 0.0}
-
-
-def test_selection_flips_accept_results_and_mappings():
+def test_selection_flips_of_results_are_counted_per_100_frames_by_the_one_rule():
     elements = frame(1)
     on = select(elements, None, hybrid(), time_left_ms=1, element_ms=np.ones(1))
     off = select(elements, None, hybrid(), time_left_ms=0, element_ms=np.ones(1))
-    assert heuristic.selection_flips([on, {"e0": False}, on, off]) == {"e0": 100.0}
-    assert heuristic.selection_flips([]) == {}
+    rows = [row for number, result in enumerate([on, off, on, off], 1) for row in result.rows(number)]
+    assert runlog.flips_per_element_per_100(rows) == {"e0": 75.0}  # 3 flips in 4 frames
 
 
 def test_mismatched_array_lengths_are_refused_with_the_field_name():
@@ -462,7 +458,7 @@ def test_an_element_whose_visibility_changes_by_less_than_its_hysteresis_margin_
     settings_ = hybrid(selection_weight=weight)
     steady = steady_selection(FrameElements(**scene), settings_, element_ms, time_left)
     assume(steady is not None)
-    margin = heuristic.hysteresis_margin(steady)
+    margin = hysteresis_margin(steady)
     movable = [index for index in range(len(steady.names))
                if 0 < steady.V[index] < np.max(np.delete(steady.V, index)) and margin[index] > 0]
     assume(movable)
@@ -504,5 +500,5 @@ def test_no_nan_or_inf_anywhere_even_from_extreme_input(scene, data, budget, wei
     assert all_finite(result)
     for row in result.rows(0):
         assert all(np.isfinite(value) for value in row.values() if isinstance(value, float))
-    margin = heuristic.hysteresis_margin(result)
+    margin = hysteresis_margin(result)
     assert np.all(np.isfinite(margin)) and np.all(margin >= 0)

@@ -103,7 +103,7 @@ def snapshot(meshes, materials, lights=(), world=BLACK, max_bounces=4):
 
 def build(snap, threads=1):
     scene = TraceScene(threads=threads)
-    scene.update(snap, np.array([m.is_transparent for m in snap.materials], bool))
+    scene.update(snap)
     return scene, RadianceTracer(scene, snap, shading.MaterialTable(snap.materials))
 
 
@@ -442,17 +442,16 @@ def test_moved_object_is_traced_where_it_is_now(closing):
     lid = quad("lid", (0, 0, 1.0), 1, 1, "-z")
     scene = TraceScene(threads=1)
     closing(scene)
-    transparent = np.zeros(1, bool)
-    scene.update(snapshot([floor, lid], materials), transparent)
+    scene.update(snapshot([floor, lid], materials))
     up = np.array([[0.0, 0.0, 0.5]])
     assert scene.intersect(scene.to_trace(up), np.array([[0.0, 0.0, 1.0]]))["t"][0] == pytest.approx(0.5, rel=1e-5)
     moved = quad("lid", (0, 0, 1.0), 1, 1, "-z")
     moved.matrix_world = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 2.0], [0, 0, 0, 1]], float)
-    scene.update(snapshot([floor, moved], materials), transparent)
+    scene.update(snapshot([floor, moved], materials))
     assert scene.intersect(scene.to_trace(up), np.array([[0.0, 0.0, 1.0]]))["t"][0] == pytest.approx(2.5, rel=1e-5)
     assert scene.stats["dynamic_triangles"] == 2
     # Removed: nothing above any more.
-    scene.update(snapshot([floor], materials), transparent)
+    scene.update(snapshot([floor], materials))
     assert np.isinf(scene.intersect(scene.to_trace(up), np.array([[0.0, 0.0, 1.0]]))["t"][0])
 
 
@@ -461,8 +460,7 @@ def test_trace_scene_starts_over_when_the_whole_scene_is_replaced(closing):
     scene, _ = build(shadow_scene(1.0, 0.0)[0], threads=1)
     closing(scene)
     snap, shift = shadow_scene(1.0, 1e5)
-    transparent = np.zeros(len(snap.materials), bool)
-    scene.update(snap, transparent)
+    scene.update(snap)
     np.testing.assert_allclose(scene.origin, shift + [0.0, 0.0, 0.5])
     assert scene.stats["dynamic_triangles"] == 0  # all of it is static again
     radiance_tracer = RadianceTracer(scene, snap, shading.MaterialTable(snap.materials))
@@ -528,7 +526,7 @@ def test_degenerate_input_never_produces_nan(closing):
     assert np.all(np.isfinite(color)) and np.all(color >= 0)
     empty = TraceScene(threads=1)
     closing(empty)
-    empty.update(snapshot([], [diffuse("grey")]), np.zeros(1, bool))
+    empty.update(snapshot([], [diffuse("grey")]))
     empty_tracer = RadianceTracer(empty, snapshot([], [diffuse("grey")], world=(0.2, 0.2, 0.2)),
                                   shading.MaterialTable([diffuse("grey")]))
     np.testing.assert_allclose(empty_tracer.radiance(origins[:5], directions[20:25], 0), 0.2)
@@ -550,7 +548,7 @@ def raycast_shadow_maps(snap, light, size):
     centre through the same light views (window depth, row 0 at the bottom)."""
     scene = TraceScene(threads=1)
     try:
-        scene.update(snap, np.zeros(len(snap.materials), bool))
+        scene.update(snap)
         maps = []
         for view in shadowmap.light_views(light, snap.bounds(), size):
             centres = (np.arange(view.size) + 0.5) / view.size * 2.0 - 1.0

@@ -25,7 +25,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import phrt  # noqa: E402
-from phrt import cli, compat  # noqa: E402
+from phrt import blender_process, compat  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
 
@@ -144,13 +144,13 @@ def test_blend_file_version_reads_every_kind_of_header(tmp_path):
 
 
 def test_sample_scene_saved_by_another_blender_is_rebuilt(tmp_path, monkeypatch):
-    monkeypatch.setattr(cli, "SAMPLE_DIR", tmp_path)  # no generator modules: only the version counts
+    monkeypatch.setattr(blender_process, "SAMPLE_DIR", tmp_path)  # no generator modules: only the version counts
     saved_scene(tmp_path, "arcade.blend", compress=True)
-    assert not cli._sample_is_stale(tmp_path / "arcade.blend")
+    assert not blender_process.sample_is_stale(tmp_path / "arcade.blend")
     major, minor = bpy.app.version[:2]
     other = b"BLENDER-v402" if (major, minor) != (4, 2) else b"BLENDER-v405"
     (tmp_path / "arcade.blend").write_bytes(other + b"REND" + bytes(64))
-    assert cli._sample_is_stale(tmp_path / "arcade.blend")
+    assert blender_process.sample_is_stale(tmp_path / "arcade.blend")
 
 
 def test_image_format_is_set_and_restored_on_this_version():

@@ -69,14 +69,11 @@ def four_runs(blend):
     """Raster, raytrace, and two hybrid runs after them at budgets whose selection does not depend
     on timing (everything affordable, nothing affordable): their logs must match run for run."""
     references = ["showcase-Camera-raster", "showcase-Camera-raytrace"]
-    fixed = {"budget_at": None, "cost_mode": "PAPER"}
     return a_plan(blend, [
         plan_module.Job(references[0], "run", "RASTER"),
         plan_module.Job(references[1], "run", "RAYTRACE"),
-        plan_module.Job("showcase-Camera-hybrid-all", "run", "HYBRID", depends_on=references,
-                        overrides={**fixed, "budget_ms": 100000.0}),
-        plan_module.Job("showcase-Camera-hybrid-none", "run", "HYBRID", depends_on=references,
-                        overrides={**fixed, "budget_ms": 0.0}),
+        plan_module.Job("showcase-Camera-hybrid-all", "run", "HYBRID", depends_on=references, budget_ms=100000.0),
+        plan_module.Job("showcase-Camera-hybrid-none", "run", "HYBRID", depends_on=references, budget_ms=0.0),
     ])
 
 

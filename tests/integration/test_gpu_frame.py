@@ -22,7 +22,7 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 
 import phrt  # noqa: E402
-from phrt.engine import extract, final, gpu_resources, raster  # noqa: E402
+from phrt.engine import extract, final, gpu_resources, raster, session  # noqa: E402
 from phrt.phrt_addon import lighting  # noqa: E402
 from phrt.phrt_addon.frame import TracedTerms  # noqa: E402
 from phrt.phrt_addon.scene import Element, Material, MeshInstance  # noqa: E402
@@ -124,14 +124,14 @@ def render_frames(scene, frames, mode="RASTER"):
     """Render ``frames`` (a list of callables applied before each frame) in one replay session.
     Returns the creation counters before the first frame and after each, and each frame's stats."""
     scene.phrt.mode = mode
-    counts = [dict(gpu_resources.RESOURCES.created, upload=gpu_resources.RESOURCES.uploads)]
+    counts = [dict(session.current().resources.created, upload=session.current().resources.uploads)]
     stats = []
     with final.ReplaySession():
         for change in frames:
             change()
             bpy.ops.render.render()
-            counts.append(dict(gpu_resources.RESOURCES.created, upload=gpu_resources.RESOURCES.uploads))
-            stats.append(dict(final.LAST_FRAME["stats"]))
+            counts.append(dict(session.current().resources.created, upload=session.current().resources.uploads))
+            stats.append(dict(final.last_frame().stats))
     return counts, stats
 
 
@@ -141,7 +141,7 @@ def created_between(counts, kind, first, last):
 
 def test_static_replay_creates_nothing_after_its_first_frame_and_frees_everything_at_its_end():
     scene = showcase.build_showcase(WIDTH, HEIGHT)
-    before = gpu_resources.RESOURCES.counts()
+    before = session.current().resources.counts()
     counts, stats = render_frames(scene, [lambda: None] * 4, mode="HYBRID")
     for kind in ("shader", "upload", "mesh", "shadow_map", "target", "material_table"):
         assert created_between(counts, kind, 1, 4) == 0, kind
@@ -149,7 +149,7 @@ def test_static_replay_creates_nothing_after_its_first_frame_and_frees_everythin
     # The recurring costs of the budget are the per-frame ones only: no set-up after frame 2.
     assert stats[0]["setup_ms"] > 0
     assert all(s["setup_ms"] < 1.0 for s in stats[1:])  # Embree refits of nothing, no compiles
-    after = gpu_resources.RESOURCES.counts()
+    after = session.current().resources.counts()
     for kind in SCENE_KINDS:
         created = after.get(kind, (0, 0))[0] - before.get(kind, (0, 0))[0]
         freed = after.get(kind, (0, 0))[1] - before.get(kind, (0, 0))[1]
@@ -187,17 +187,17 @@ def test_f12_renders_keep_resources_and_a_file_load_frees_them(tmp_path):
     scene = showcase.build_showcase(WIDTH, HEIGHT)
     scene.phrt.mode = "RASTER"
     bpy.ops.render.render()
-    first = dict(gpu_resources.RESOURCES.created, upload=gpu_resources.RESOURCES.uploads)
+    first = dict(session.current().resources.created, upload=session.current().resources.uploads)
     bpy.ops.render.render()
-    assert gpu_resources.RESOURCES.uploads == first["upload"]
-    assert gpu_resources.RESOURCES.created["shader"] == first["shader"]
-    live = gpu_resources.RESOURCES.live()
+    assert session.current().resources.uploads == first["upload"]
+    assert session.current().resources.created["shader"] == first["shader"]
+    live = session.current().resources.live()
     assert live["mesh"] > 0 and live["shader"] > 0
     path = tmp_path / "saved.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
-    assert gpu_resources.RESOURCES.empty
-    assert all(count == 0 for count in gpu_resources.RESOURCES.live().values())
+    assert session.current().resources.empty
+    assert all(count == 0 for count in session.current().resources.live().values())
 
 
 def test_raster_mode_reads_back_no_layers_and_hybrid_does_when_candidates_are_visible():

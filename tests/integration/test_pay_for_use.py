@@ -15,7 +15,7 @@ RASTER_SCRIPT = textwrap.dedent("""
     bpy.ops.render.render()
     bpy.ops.render.render()
     from phrt.engine import final
-    stats = final.LAST_FRAME["stats"]
+    stats = final.last_frame().stats
     assert stats["n_selected"] == 0 and stats["rays"] == 0, stats
     print("EMBREEX-IMPORTED" if "embreex" in sys.modules else "EMBREEX-NOT-IMPORTED")
 """)
@@ -38,11 +38,11 @@ def test_no_candidates_means_no_trace_work(blender):
             obj.phrt.candidate = False
     scene.phrt.mode = "RAYTRACE"
     blender.ops.render.render()
-    stats = final.LAST_FRAME["stats"]
+    stats = final.last_frame().stats
     assert stats["n_candidates"] == 0
     assert stats["rays"] == 0 and stats["upload_ms"] == 0.0
     assert stats["trace_ms"] < 1.0  # nothing but the check that nothing is selected
-    assert all(row["reason"] == "not_candidate" for row in final.LAST_FRAME["rows"])
+    assert all(row["reason"] == "not_candidate" for row in final.last_frame().rows)
 
 
 def test_no_lights_means_no_shadow_work(blender):
@@ -53,7 +53,7 @@ def test_no_lights_means_no_shadow_work(blender):
         blender.data.objects.remove(obj)
     scene.phrt.mode = "RAYTRACE"
     blender.ops.render.render()
-    stats = final.LAST_FRAME["stats"]
+    stats = final.last_frame().stats
     assert stats["n_selected"] > 0, "candidates are still traced (reflections, refractions)"
     assert stats["shadow_rays"] == 0
     assert stats["reflection_rays"] > 0

@@ -92,7 +92,7 @@ def camera_rays(scene):
 
 
 def selected_elements():
-    return {row["element"] for row in final.LAST_FRAME["rows"] if row["selected"]}
+    return {row["element"] for row in final.last_frame().rows if row["selected"]}
 
 
 # -- analytic geometry (numpy, whole images) ------------------------------------------------------------
@@ -184,7 +184,7 @@ def test_mirror_sphere_reflects_the_red_cube_where_the_mirror_rays_say(tmp_path)
     for mode in ("RAYTRACE", "RASTER"):
         red = red_dominant(render(scene, mode, "mirror", tmp_path)["Combined"][..., :3])
         results[mode] = (red[sure_red].mean(), red[sure_not_red].mean())
-    assert final.LAST_FRAME["stats"]["n_selected"] == 0
+    assert final.last_frame().stats["n_selected"] == 0
     assert results["RAYTRACE"][0] > 0.97, results
     assert results["RAYTRACE"][1] < 0.01, results
     assert results["RASTER"][0] < 0.01, results  # raster reflects the world colour only
@@ -464,7 +464,7 @@ def test_elements_touching_the_camera_render_finite_frames(tmp_path):
     showcase.add_camera(camera_location, (0.0, 0.0, 0.5))
     for mode in MODES:
         passes = render(scene, mode, "touching", tmp_path)
-        assert final.LAST_FRAME["stats"]["mode"] == mode
+        assert final.last_frame().stats["mode"] == mode
         assert passes["Combined"][..., :3].max() > 0
 
 
@@ -512,7 +512,7 @@ def test_every_pass_is_finite_in_every_mode(name, tmp_path):
     scene = SCENES[name]()
     for mode in MODES:
         render(scene, mode, f"finite-{name}", tmp_path)  # render() asserts every value of every pass is finite
-        assert final.LAST_FRAME["stats"]["mode"] == mode
+        assert final.last_frame().stats["mode"] == mode
 
 
 def test_a_new_file_far_away_renders_like_the_first(tmp_path):

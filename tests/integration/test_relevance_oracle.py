@@ -18,7 +18,7 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 
 import phrt  # noqa: E402
-from phrt.engine import final, replay  # noqa: E402
+from phrt.engine import final, replay, session  # noqa: E402
 from phrt.engine import oracle as oracle_engine  # noqa: E402
 from phrt.phrt_addon import metrics, oracle, runlog  # noqa: E402
 from phrt.sample_scenes import showcase as build  # noqa: E402
@@ -71,7 +71,7 @@ def render_frames(count):
     frames = []
     for _ in range(count):
         bpy.ops.render.render()
-        frames.append({row["element"]: row for row in final.LAST_FRAME["rows"]})
+        frames.append({row["element"]: row for row in final.last_frame().rows})
     return frames
 
 
@@ -95,7 +95,7 @@ def test_error_relevance_traces_the_mirror_after_its_first_traced_frames(second)
     for frame in frames[2:]:
         assert frame["Mirror"]["selected"], [f["Mirror"]["selected"] for f in frames]
         assert frame["Mirror"]["benefit"] == pytest.approx(1.0) and frame[other]["benefit"] < 0.2
-    estimates = final._STANDALONE[bpy.context.scene.name].benefit_model.estimates
+    estimates = session.current().renderers.get(bpy.context.scene.name).benefit_model.estimates
     assert estimates["Mirror"] > 0.2  # measured: the red wall in the mirror, per pixel
     if second == "dark mirror" and other in estimates:
         assert estimates[other] < 0.05  # traced once (a tie at equal priors), and seen to change little

@@ -19,7 +19,7 @@ import pytest  # noqa: E402
 
 import phrt  # noqa: E402
 from phrt import compat  # noqa: E402
-from phrt.engine import final, gpu_resources, replay, viewport  # noqa: E402
+from phrt.engine import final, replay, session, viewport  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
 from gpu_probe import run_on_gpu  # noqa: E402
@@ -40,7 +40,7 @@ def scene():
     """The showcase at 160x120 with its camera keyframed over frames 1-30."""
     scene = build_showcase(WIDTH, HEIGHT)
     animate_camera(scene.camera, PATH_FRAMES)
-    final.LAST_FRAME.update(rows=[], problems=[], stats={})
+    final.last_frame().clear()
     return scene
 
 
@@ -78,7 +78,7 @@ def rgb(channels):
 
 
 def row_of(element, rows=None):
-    rows = final.LAST_FRAME["rows"] if rows is None else rows
+    rows = final.last_frame().rows if rows is None else rows
     return next(row for row in rows if row["element"] == element)
 
 
@@ -176,6 +176,7 @@ def test_tagging_an_object_updates_the_candidate_list_without_a_render(scene):
 
 def test_candidate_list_sorts_by_relevance_and_hides_non_candidates(scene):
     from phrt.panels import candidates
+    from phrt.engine import candidate_list
     bpy.ops.render.render()
     window_manager = bpy.context.window_manager
     items = window_manager.phrt_candidates
@@ -278,7 +279,7 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     mirror = bpy.data.objects["MirrorSphere"]
     bpy.context.view_layer.objects.active = mirror
     mirror.select_set(True)
-    final.LAST_FRAME["problems"] = ["Object 'Broken' skipped: no geometry"]
+    final.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
     for panel in view3d.PANELS:
         assert hasattr(bpy.types, panel.__name__), f"{panel.__name__} is not registered"
         assert panel.bl_category == "PHRT" and panel.bl_space_type == "VIEW_3D" and panel.bl_region_type == "UI"
@@ -295,9 +296,14 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     assert {"candidate", "priority", "rt_cost", "shadows", "reflections",
             "refractions"} <= set(props("PHRT_PT_element"))
     assert ("operator", "phrt.copy_settings_to_selected") in logs["PHRT_PT_element"]
+    from phrt.panels import render
+    assert render.PHRT_PT_render.bl_context == "render" and hasattr(bpy.types, "PHRT_PT_render")
+    assert render.PHRT_PT_render.poll(panel_context(scene, "PHRT"))
+    assert not render.PHRT_PT_render.poll(panel_context(scene, "CYCLES"))
+    render_log = draw_panel(render.PHRT_PT_render, context)
     assert {"mode", "budget_ms", "selection_weight", "max_area_fraction", "max_bounces",
-            "cost_mode"} <= set(props("PHRT_PT_renderer"))
-    assert ("label", view3d.frame_rate_text(scene.phrt.budget_ms)) in logs["PHRT_PT_renderer"]
+            "cost_mode"} <= {item[1] for item in render_log if item[0] == "prop"}
+    assert ("label", render.frame_rate_text(scene.phrt.budget_ms)) in render_log
     assert ("list", "PHRT_UL_candidates") in logs["PHRT_PT_candidates"]
     assert ("operator", "phrt.replay_path") in logs["PHRT_PT_replay"]
     assert ("operator", "phrt.export_selection_log") in logs["PHRT_PT_replay"]
@@ -305,10 +311,11 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     assert ("label", "Object 'Broken' skipped: no geometry") not in logs["PHRT_PT_last_render"]  # a new frame
     assert ("label", "No problems") in logs["PHRT_PT_last_render"]
 
-    final.LAST_FRAME["problems"] = ["Object 'Broken' skipped: no geometry"]
+    final.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
     assert ("label", "Object 'Broken' skipped: no geometry") in draw_panel(view3d.PHRT_PT_last_render, context)
 
     from phrt.panels import candidates
+    from phrt.engine import candidate_list
     log = []
     item = bpy.context.window_manager.phrt_candidates["MirrorSphere"]
     candidates.PHRT_UL_candidates.draw_item(None, context, FakeLayout(log), None, item, 0, None, "", 0)
@@ -337,41 +344,42 @@ def test_replay_panel_button_runs_the_replay_it_shows(scene, tmp_path):
 def test_renders_finished_on_another_thread_refresh_the_list_on_the_main_thread(scene):
     import threading
     from phrt.panels import candidates
+    from phrt.engine import candidate_list
     bpy.ops.render.render()
     window_manager = bpy.context.window_manager
     window_manager.phrt_candidates.clear()
-    thread = threading.Thread(target=candidates.refresh_after_render, args=(scene,))
+    thread = threading.Thread(target=candidate_list.refresh_after_render, args=(scene,))
     thread.start()
     thread.join()
     assert len(window_manager.phrt_candidates) == 0  # nothing touched off the main thread
-    assert candidates._drain_pending() > 0  # the timer keeps running
+    assert candidate_list.drain_pending() > 0  # the timer keeps running
     assert len(window_manager.phrt_candidates) == 5
 
 
 def test_frame_rate_beside_the_budget():
-    from phrt.panels import view3d
-    assert view3d.frame_rate_text(16.6667) == "60 fps"
-    assert view3d.frame_rate_text(150.0) == "6.67 fps"
-    assert view3d.frame_rate_text(0.0) == "no budget"
+    from phrt.panels import render
+    assert render.frame_rate_text(16.6667) == "60 fps"
+    assert render.frame_rate_text(150.0) == "6.67 fps"
+    assert render.frame_rate_text(0.0) == "no budget"
 
 
 def test_operators_and_panels_unregister_cleanly(scene):
     from phrt import operators, panels
-    from phrt.panels import candidates
-    assert candidates.refresh_after_render in bpy.app.handlers.render_post
+    from phrt.engine import candidate_list
+    assert candidate_list.refresh_after_render in bpy.app.handlers.render_post
     panels.unregister()
     operators.unregister()
     try:
-        assert candidates.refresh_after_render not in bpy.app.handlers.render_post
-        assert not hasattr(bpy.types.WindowManager, "phrt_candidates")
+        assert candidate_list.refresh_after_render not in bpy.app.handlers.render_post
+        assert hasattr(bpy.types.WindowManager, "phrt_candidates")  # a property: properties.py owns it
         assert not hasattr(bpy.types, "PHRT_PT_element")
         assert not hasattr(bpy.types, "PHRT_OT_replay_path")
         bpy.ops.render.render()  # the engine still renders without its UI
     finally:
         operators.register()
         panels.register()
-    assert candidates.refresh_after_render in bpy.app.handlers.render_post
-    assert bpy.app.handlers.render_post.count(candidates.refresh_after_render) == 1
+    assert candidate_list.refresh_after_render in bpy.app.handlers.render_post
+    assert bpy.app.handlers.render_post.count(candidate_list.refresh_after_render) == 1
 
 
 # -- replaying a camera path -------------------------------------------------------
@@ -420,6 +428,7 @@ def test_replay_of_thirty_frames_from_a_saved_blend(scene, tmp_path):
     run_dir = replay.default_run_dir(tmp_path / "runs", "showcase", "Camera", "HYBRID")
     frame_rows, selection, summary = check_run(run_dir, range(1, PATH_FRAMES + 1), "HYBRID")
     assert summary["scene"] == "showcase" and summary["path"] == "Camera" and not summary["cancelled"]
+    assert summary["partial"] is False and summary["frames_planned"] == PATH_FRAMES
     assert summary["frame_range"] == [1, PATH_FRAMES]
     channels = read_passes(run_dir / "frames" / "0030.exr")
     assert {"Combined.R", "Depth.Z", "Normal.X", "PHRT Selected.X", "PHRT Candidate.X"} <= set(channels)
@@ -476,6 +485,7 @@ def test_cancelled_replay_keeps_complete_frames_and_logs(scene, tmp_path):
     assert result.cancelled and result.frames_done == 4
     check_run(tmp_path / "run", [1, 2, 3, 4], "HYBRID")
     assert runlog.read_summary(tmp_path / "run")["cancelled"] is True
+    assert runlog.read_summary(tmp_path / "run")["partial"] is True
     assert len(runlog.read_selection(tmp_path / "run")) == 4 * 5
 
 
@@ -487,11 +497,11 @@ def test_stepped_replay_cancelled_by_esc_keeps_what_was_rendered(scene, tmp_path
     for _ in range(3):
         run.step()
     assert run.remaining == PATH_FRAMES - 3
-    assert final.ACTIVE_SESSION is run.session  # between ticks the session stays active
+    assert final.active_replay() is run.session  # between ticks the session stays active
     result = run.finish(cancelled=True)
-    assert result.cancelled and result.frames_done == 3 and final.ACTIVE_SESSION is None
+    assert result.cancelled and result.frames_done == 3 and final.active_replay() is None
     _, _, summary = check_run(tmp_path / "run", [1, 2, 3], "HYBRID")
-    assert summary["cancelled"] is True and summary["scene"] == "showcase"
+    assert summary["cancelled"] is True and summary["partial"] is True and summary["scene"] == "showcase"
     assert scene.frame_current == 1 and scene.render.filepath == filepath
 
 
@@ -546,7 +556,7 @@ def test_export_selection_log_round_trips_csv_and_json(scene, tmp_path):
     with pytest.raises(RuntimeError, match="render a frame with PHRT first"):
         bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "empty.csv"))
     bpy.ops.render.render()
-    rows = final.LAST_FRAME["rows"]
+    rows = final.last_frame().rows
     assert bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "log.csv")) == {"FINISHED"}
     assert bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "log.JSON")) == {"FINISHED"}
 
@@ -606,7 +616,7 @@ def test_overlay_colors_follow_the_last_decisions():
 def test_overlay_boxes_surround_the_candidates_of_the_last_frame(scene):
     bpy.data.materials["Red"].phrt.candidate = True
     bpy.ops.render.render()
-    colors = viewport.overlay_colors(final.LAST_FRAME["rows"])
+    colors = viewport.overlay_colors(final.last_frame().rows)
     assert set(colors) == {"MirrorSphere", "GlassSlab", "Fence", "RedCube/Red"}
     boxes = viewport.overlay_boxes(bpy.context.evaluated_depsgraph_get(), colors)
     assert len(boxes) == 4
@@ -681,7 +691,7 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
                         if update:
                             view_render.update(depsgraph)
                         view_render.draw(engine, context, depsgraph)
-                        textures.append((view_render.image_frame, gpu_resources.RESOURCES.frames_drawn))
+                        textures.append((view_render.image_frame, session.current().resources.frames_drawn))
                 buffer = gpu.types.Buffer("FLOAT", WIDTH * HEIGHT * 4)
                 framebuffer.read_color(0, 0, WIDTH, HEIGHT, 4, 0, "FLOAT", data=buffer)
                 drawn = np.asarray(buffer).reshape(HEIGHT, WIDTH, 4).copy()

@@ -25,9 +25,9 @@ import time
 
 import numpy as np
 
-from . import shading
-from .scene import Camera, Material, MeshInstance, SceneSnapshot
-from .tracer import TraceScene, ray_epsilon
+from ..phrt_addon import shading
+from ..phrt_addon.scene import Camera, Material, MeshInstance, SceneSnapshot
+from ..phrt_addon.tracer import TraceScene
 
 WIDTH, HEIGHT = 640, 480
 REPEATS = 5
@@ -138,10 +138,10 @@ def ray_sets(trace_scene, origins_world, directions):
     hits = trace_scene.intersect(origins, directions)
     hit = np.isfinite(hits["t"])
     points = origins[hit] + directions[hit] * hits["t"][hit, None]
-    _, _, _, normal, geometric, _, _ = trace_scene.hit_surfaces(hits, hit)
+    _, _, _, normal, geometric, _, set_index = trace_scene.hit_surfaces(hits, hit)
     incoming = directions[hit]
     facing = np.where((np.sum(geometric * incoming, axis=1) < 0)[:, None], normal, -normal)
-    eps = ray_epsilon(points, trace_scene.extent)
+    eps = trace_scene.epsilon(points, set_index=set_index)
     to_sun = -shading.normalize(np.asarray(SUN_DIRECTION, float))
     lit = facing @ to_sun > 0
     shadow_origins = points[lit] + facing[lit] * eps[lit, None]
@@ -156,14 +156,16 @@ def ray_sets(trace_scene, origins_world, directions):
     }
 
 
-def _queries(trace_scene, embree_scene, effect, origins, directions, dists):
-    """(ours, raw, same_answers) for one ray set."""
+def _queries(trace_scene, embree_set, effect, origins, directions, dists):
+    """(ours, raw, same_answers) for one ray set (raw: the same rays in the set's own frame)."""
+    embree_scene = embree_set.scene
+    local_origins = embree_set.local(origins)
     if effect == "shadow":
         def ours():
             return trace_scene.occluded(origins, directions, dists)
 
         def raw():
-            return embree_scene.run(origins, directions, dists=dists.copy(), query="OCCLUDED")
+            return embree_scene.run(local_origins, directions, dists=dists.copy(), query="OCCLUDED")
 
         return ours, raw, bool(np.array_equal(ours(), np.asarray(raw()) != -1))
 
@@ -171,7 +173,7 @@ def _queries(trace_scene, embree_scene, effect, origins, directions, dists):
         return trace_scene.intersect(origins, directions)
 
     def raw():
-        return embree_scene.run(origins, directions, output=1)
+        return embree_scene.run(local_origins, directions, output=1)
 
     raw_out = raw()
     raw_t = np.where(raw_out["geomID"] != -1, raw_out["tfar"], np.inf).astype(np.float32)
@@ -181,17 +183,17 @@ def _queries(trace_scene, embree_scene, effect, origins, directions, dists):
 def run(out=print, repeats=REPEATS):
     """Build the scene, trace the three ray sets three ways, print the table; returns the rows."""
     snapshot = bench_scene()
-    transparent = np.zeros(len(snapshot.materials), bool)
     pooled, single = TraceScene(), TraceScene(threads=1)
     try:
-        upload_ms = pooled.update(snapshot, transparent)
-        single.update(snapshot, transparent)
-        embree_scene = next(s.scene for kind, s in pooled._static if kind == "opaque" and not s.empty)
+        upload_ms = pooled.update(snapshot)
+        single.update(snapshot)
+        embree_set = next(s for s in pooled.sets() if s.casts_shadow and not s.empty)
+        assert len(pooled.sets()) == 1, "the bench scene is one cluster of casters"
         origins_world, directions = camera_rays()
         rows = []
         for effect, (origins, rays_directions, dists) in ray_sets(pooled, origins_world, directions).items():
-            ours, raw, same = _queries(pooled, embree_scene, effect, origins, rays_directions, dists)
-            ours_single, _, same_single = _queries(single, embree_scene, effect, origins, rays_directions, dists)
+            ours, raw, same = _queries(pooled, embree_set, effect, origins, rays_directions, dists)
+            ours_single, _, same_single = _queries(single, embree_set, effect, origins, rays_directions, dists)
             ours_ms, single_ms, raw_ms = _median_ms((ours, ours_single, raw), repeats)
             n = len(origins)
             rows.append({"effect": effect, "rays": n, "ours_ms": ours_ms, "ours_1thread_ms": single_ms,

@@ -1,0 +1,173 @@
+"""Selection quality in the report: popping per run, the oracle's regret, and the rows of ``sweep.csv``.
+"""
+import csv
+import json
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import oracle, popping, runlog
+from .runs import METRIC_THREADS, SWEEP_COLUMNS
+
+
+def _measure_popping(runs, references):
+    """{id(run): PoppingResult} for runs with images whose path has a reference with images."""
+    pops = {}
+    reference_maps = {}  # shared by the runs (threads may both compute a map: same value)
+    measured = []
+    for run in runs:
+        reference = references.get(run.group)
+        if reference is None or not reference.has_images or not run.has_images:
+            continue
+        if run is reference:
+            pops[id(run)] = popping.PoppingResult(frame_count=len(run.frames))  # the reference: 0 by definition
+            continue
+        measured.append((run, reference))
+    with ThreadPoolExecutor(METRIC_THREADS) as pool:
+        results = pool.map(lambda pair: popping.measure_popping(pair[0].run_dir, pair[1].run_dir, pair[0].selection,
+                                                                reference_maps), measured)
+        for (run, _), result in zip(measured, results):
+            pops[id(run)] = result
+    return pops
+
+
+def _oracle_results(runs, oracle_dir):
+    """The oracle folder's results (several folders, e.g. two sweeps, are merged)."""
+    if oracle_dir is None:
+        parents = {run.run_dir.resolve().parent for run in runs}
+        if len(parents) != 1:
+            return None
+        oracle_dir = next(iter(parents)) / oracle.ORACLE_DIR
+    folders = [oracle_dir] if isinstance(oracle_dir, (str, Path)) else list(oracle_dir)
+    found = [results for results in map(oracle.read_results, folders) if results is not None]
+    if not found:
+        return None
+    for results in found:  # which sweep each candidate row came from
+        results.candidate_rows = [{"sweep": results.folder.resolve().parent.name, **row}
+                                  for row in results.candidate_rows]
+    merged = found[0]
+    for results in found[1:]:
+        merged.info = {**merged.info, "runs": {**merged.info.get("runs", {}), **results.info.get("runs", {})}}
+        merged.regret_rows = merged.regret_rows + results.regret_rows
+        merged.candidate_rows = merged.candidate_rows + results.candidate_rows
+    return merged
+
+
+@dataclass
+class RunRegret:
+    """The oracle's verdict on one hybrid run."""
+
+    frames: int = 0
+    mean: float | None = None
+    max: float | None = None
+    heuristic_flip: float | None = None
+    oracle_flip: float | None = None
+    differs: int = 0
+    overran: int = 0
+    lost_share: float | None = None  # mean (heuristic - oracle) / (raster - oracle) where the oracle gains
+    oracle_only: dict = field(default_factory=dict)
+    heuristic_only: dict = field(default_factory=dict)
+    note: str = ""
+
+
+def _regrets(runs, results):
+    """{id(run): RunRegret} of the hybrid runs."""
+    regrets = {}
+    for run in runs:
+        if run.mode != "HYBRID":
+            continue
+        if results is None:
+            regrets[id(run)] = RunRegret(note="no oracle (run 'phrt sweep')")
+            continue
+        name = run.run_dir.name
+        if not results.is_current_for(name, run.run_dir):
+            note = "not in the oracle" if name not in results.runs() else "oracle is older than the run"
+            regrets[id(run)] = RunRegret(note=note)
+            continue
+        rows = results.rows_of(name)
+        if not rows:
+            regrets[id(run)] = RunRegret(note="no sampled frame")
+            continue
+        values = np.array([row["regret"] for row in rows], dtype=float)
+        raster = {int(row["frame"]): float(row["flip_raster"]) for row in results.candidate_rows
+                  if row.get("sweep", results.folder.resolve().parent.name) == run.run_dir.resolve().parent.name}
+        shares = [(row["heuristic_flip"] - row["oracle_flip"]) / (raster[row["frame"]] - row["oracle_flip"])
+                  for row in rows if row["frame"] in raster and raster[row["frame"]] - row["oracle_flip"] > 1e-6]
+        oracle_only, heuristic_only = {}, {}
+        for row in rows:
+            for element in row["oracle_only"]:
+                oracle_only[element] = oracle_only.get(element, 0) + 1
+            for element in row["heuristic_only"]:
+                heuristic_only[element] = heuristic_only.get(element, 0) + 1
+        regrets[id(run)] = RunRegret(
+            frames=len(rows), mean=float(values.mean()), max=float(values.max()),
+            heuristic_flip=float(np.mean([row["heuristic_flip"] for row in rows])),
+            oracle_flip=float(np.mean([row["oracle_flip"] for row in rows])),
+            differs=sum(1 for row in rows if set(row["oracle"]) != set(row["heuristic"])),
+            overran=sum(1 for row in rows if row["capacity_ms"] is not None and row["time_left_ms"] is not None
+                        and row["capacity_ms"] > row["time_left_ms"]),
+            lost_share=float(np.mean(shares)) if shares else None,
+            oracle_only=oracle_only, heuristic_only=heuristic_only)
+    return regrets
+
+
+def variant_label(variant) -> str:
+    """A short name of a selection variant: the paper's heuristic and what differs from it."""
+    cost_mode, weight, order, relevance = variant
+    parts = ["error-aware R" if relevance == "error" else "paper R"]
+    parts.append(f"{cost_mode} cost")
+    parts.append(f"I={weight:g}")
+    if order == "relevance_per_ms":
+        parts.append("R/ms order")
+    return ", ".join(parts)
+
+
+def sweep_rows(runs, errors, regrets, pops, references):
+    """One dict per run with the keys of SWEEP_COLUMNS (None where not applicable)."""
+    rows = []
+    for run in runs:
+        outcome = errors[id(run)]
+        regret = regrets.get(id(run))
+        pop = pops.get(id(run))
+        hybrid = run.mode == "HYBRID"
+        rates = np.array(list(runlog.flips_per_element_per_100(run.selection).values()), dtype=float)
+        cost_mode, weight, order, relevance = run.variant
+        rows.append({
+            "run": run.label, "mode": run.mode, "cost_mode": cost_mode if hybrid else None,
+            "budget_ms": run.summary.get("budget_ms") if hybrid else None,
+            "mean_ms": run.mean("total_ms"), "p95_ms": run.percentile("total_ms", 95),
+            "flip": outcome.mean("flip"), "relmse": outcome.mean("relmse"), "psnr": outcome.mean("psnr_db"),
+            "regret": regret.mean if regret is not None else None,
+            "flips_per_100": float(rates.mean()) if rates.size else 0.0,
+            "popping": pop.per_100_frames() if pop is not None else None,
+            "scene": run.scene, "path": run.path,
+            "variant": variant_label(run.variant) if hybrid else run.mode.lower(),
+            "budget_at": run.budget_at if hybrid else None,
+            "selection_weight": weight if hybrid else None, "selection_order": order if hybrid else None,
+            "relevance": relevance if hybrid else None, "frames": len(run.frames),
+            "mean_selected": run.mean("n_selected"),
+            "regret_frames": regret.frames if regret is not None else None,
+            "regret_share": regret.lost_share if regret is not None else None,
+        })
+    return rows
+
+
+def _write_sweep(csv_path, json_path, rows, oracle_results):
+    temporary = csv_path.with_name(csv_path.name + ".tmp")
+    with open(temporary, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(SWEEP_COLUMNS)
+        for row in rows:
+            writer.writerow([runlog.format_value(row[key]) for key in SWEEP_COLUMNS])
+    os.replace(temporary, csv_path)
+    document = {"columns": list(SWEEP_COLUMNS), "runs": [{key: row[key] for key in SWEEP_COLUMNS} for row in rows],
+                "oracle": None if oracle_results is None else {
+                    "every": oracle_results.info.get("every"), "frames": oracle_results.info.get("frames"),
+                    "note": oracle_results.info.get("note")}}
+    document = runlog._round_json(runlog._json_safe(document))
+    temporary = json_path.with_name(json_path.name + ".tmp")
+    temporary.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    os.replace(temporary, json_path)
