@@ -214,7 +214,11 @@ class DaskExecutor:
                     raise ExecutorError(f"cannot reach the Dask scheduler at {self.scheduler} ({_one_line(error)}): "
                                         f"start one with 'dask scheduler' (docs/cluster.md)") from None
             for plugin in self.plugins:
-                replies = self.client.register_plugin(plugin)
+                try:
+                    replies = self.client.register_plugin(plugin)
+                except Exception as error:  # a worker's set-up raised
+                    raise ExecutorError(f"a Dask worker cannot run PHRT: {describe_error(error)} (a worker needs "
+                                        f"the Python with bpy and phrt: docs/cluster.md)") from None
                 broken = {address: reply for address, reply in (replies or {}).items()
                           if isinstance(reply, dict) and reply.get("status") != "OK"}
                 if broken:
