@@ -12,7 +12,7 @@ from phrt.phrt_addon.frame import FrameRenderer
 from phrt.phrt_addon.gbuffer import GBuffer, GBufferLayer
 from phrt.phrt_addon.lighting import ReferenceRaster
 from phrt.phrt_addon.scene import Camera, Element, Light, Material, SceneSnapshot, Settings
-from phrt.phrt_addon.tracer import TraceScene
+from phrt.phrt_addon.trace_scene import TraceScene
 
 from test_tracer import box, quad
 
