@@ -98,11 +98,16 @@ class FrameRenderer:
         layers = None
         readback_ms = 0.0
         may_trace = mode != "RASTER" and bool(np.any(candidate & (area_px > 0)))
-        if may_trace:
-            start = _timer()
+        learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+
+        def read_layers():
             gbuffer = raster.gbuffer()
-            layers = {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
-                      "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
+            return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
+                    "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
+
+        if learn_benefit:  # the benefit prior reads the materials under each element's pixels
+            start = _timer()
+            layers = read_layers()
             readback_ms = _ms(start)
         raster_ms = raster.raster_ms + readback_ms
 
@@ -110,9 +115,8 @@ class FrameRenderer:
         start = _timer()
         shadow_lights = [light for light in snapshot.lights if light.cast_shadows]
         element_bounds = self.element_bounds(snapshot)
-        footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px) \
-            if shadow_lights and layers is not None else np.zeros(n_elements)
-        learn_benefit = mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+        footprint = self._shadow_footprints(raster, snapshot, element_bounds, area_px) \
+            if shadow_lights and may_trace else np.zeros(n_elements)
         flags = {effect: np.array([getattr(e, effect) for e in snapshot.elements], bool)
                  for effect in ("shadows", "reflections", "refractions")}
         expected_benefit = self.benefit_model.benefit(
@@ -146,7 +150,11 @@ class FrameRenderer:
         # -- ray tracing ------------------------------------------------------
         start = _timer()
         traced_frame = TraceResult(traced=None, element_rays=np.zeros(n_elements))
-        if np.any(selected) and layers is not None:
+        if np.any(selected) and may_trace:
+            if layers is None:  # only a frame that traces reads the layers back (a trace cost)
+                begin = _timer()
+                layers = read_layers()
+                readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds)
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
@@ -224,15 +232,15 @@ class FrameRenderer:
             element=(front + 1).astype(np.float32),
         )
 
-    def _shadow_footprints(self, layers, snapshot, element_bounds, area_px):
+    def _shadow_footprints(self, raster, snapshot, element_bounds, area_px):
         """Estimated shadow-ray count per element (pixels it can shadow, summed over lights),
-        from a 1/FOOTPRINT_STEP^2 sub-sample of the opaque layer."""
+        from a 1/FOOTPRINT_STEP^2 sub-sample of the front surfaces (from the resolve's view
+        depth: no layer is read back before the selection)."""
         n = len(snapshot.elements)
         footprint = np.zeros(n)
-        samples = layers["opaque"]
-        if len(samples) == 0:
+        points = front_points(snapshot.camera, raster.view_depth, FOOTPRINT_STEP)
+        if len(points) == 0:
             return footprint
-        points = samples.world(slice(None, None, FOOTPRINT_STEP * FOOTPRINT_STEP))
         scale = FOOTPRINT_STEP * FOOTPRINT_STEP
         casters = [index for index, element in enumerate(snapshot.elements)
                    if element.is_candidate and element.shadows and area_px[index] > 0
@@ -246,6 +254,35 @@ class FrameRenderer:
         return footprint
 
     # ------------------------------------------------------------------
+
+
+def front_points(camera, view_depth, step) -> np.ndarray:
+    """World positions (float64) of every ``step``-th pixel in x and y with a surface, from its
+    distance along the view axis: on the pixel's ray, interpolated between its near and far
+    points (exact for perspective and orthographic views alike)."""
+    height, width = view_depth.shape
+    rows = np.arange(step // 2, height, step)
+    cols = np.arange(step // 2, width, step)
+    depth = np.asarray(view_depth, np.float64)[np.ix_(rows, cols)].ravel()
+    ys, xs = np.meshgrid((rows + 0.5) / height * 2.0 - 1.0, (cols + 0.5) / width * 2.0 - 1.0, indexing="ij")
+    covered = np.isfinite(depth)
+    if not np.any(covered):
+        return np.zeros((0, 3))
+    inverse = np.linalg.inv(np.asarray(camera.projection, np.float64) @ camera.view_matrix)
+    ndc = np.stack([xs.ravel()[covered], ys.ravel()[covered]], axis=1)
+
+    def unproject(z):
+        clip = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ inverse.T
+        return clip[:, :3] / clip[:, 3:4]
+
+    near, far = unproject(-1.0), unproject(1.0)
+    forward = camera.forward
+    near_depth = (near - camera.position) @ forward
+    far_depth = (far - camera.position) @ forward
+    along = (depth[covered] - near_depth) / np.where(np.abs(far_depth - near_depth) > 1e-30,
+                                                     far_depth - near_depth, 1.0)
+    points = near + (far - near) * along[:, None]
+    return points[np.all(np.isfinite(points), axis=1)]
 
 
 def _rays_per_pixel(snapshot, area_px, footprint):
