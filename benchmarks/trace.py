@@ -27,7 +27,7 @@ import numpy as np
 
 from ..phrt_addon import shading
 from ..phrt_addon.scene import Camera, Material, MeshInstance, SceneSnapshot
-from ..phrt_addon.tracer import TraceScene
+from ..phrt_addon.trace_scene import TraceScene
 
 WIDTH, HEIGHT = 640, 480
 REPEATS = 5

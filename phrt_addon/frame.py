@@ -28,71 +28,24 @@ selected element means no Embree work at all.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
-from . import benefit, heuristic, rules, shading
+from . import benefit, heuristic, shading
 from .cost_model import CostModel, FrameStats
-from .gbuffer import GBuffer, element_pixel_stats, geometric_normals
+from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame, TracedTerms
+from .gbuffer import element_pixel_stats
 from .problems import ProblemLog
 from .scene import SceneSnapshot
 from .shadow_region import ElementBounds, ShadowRegionIndex
+from .trace_stage import TraceResult, TraceStage
+
+# The frame's data types (frame_types.py) are part of this module's interface.
+__all__ = ["FOOTPRINT_STEP", "FramePasses", "FrameRenderer", "FrameResult", "LayerPixels", "RasterFrame",
+           "TracedTerms"]
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
 FOOTPRINT_STEP = 8
-
-
-class RasterFrame(Protocol):
-    width: int
-    height: int
-    raster_ms: float  # G-buffer drawn and read back, shadow maps included
-    setup_ms: float  # the one-time part of raster_ms (compiles, uploads, new shadow maps)
-    front_element: np.ndarray  # (h, w) int, -1 where no element
-    view_depth: np.ndarray  # (h, w) float32 distance along the view axis; inf = background
-    front_normal: np.ndarray  # (h, w, 3) float32
-    stats: dict
-
-    def gbuffer(self) -> GBuffer: ...
-
-    def shade(self, traced: "TracedTerms | None", measure_change: bool = False) -> np.ndarray | None: ...
-
-    def traced_change(self) -> np.ndarray:
-        """(h, w, 4) after ``shade(..., measure_change=True)``: per pixel, the luminance (clipped
-        to [0, 1]) of what the traced reflections and refractions (x) and the traced shadows (y)
-        changed against the raster image."""
-
-
-@dataclass
-class TracedTerms:
-    """What the trace stage computed, by flat pixel index (row 0 at the bottom)."""
-
-    # (layer, light index) -> (pixels, lit fraction): replaces the shadow map there
-    shadow_visibility: dict = field(default_factory=dict)
-    # layer -> (pixels, (n, 3) radiance reflected towards the viewer, blended by roughness)
-    reflection: dict = field(default_factory=dict)
-    # (pixels, (n, 3) radiance arriving through the transparent layer), or None
-    refraction: tuple | None = None
-
-
-@dataclass
-class FramePasses:
-    combined: np.ndarray | None  # (h,w,4) float32, linear, alpha 1; None if left on the GPU
-    depth: np.ndarray  # (h,w) float32 view-axis distance; 1e10 where background
-    normal: np.ndarray  # (h,w,3) float32
-    selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
-    candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
-    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
-
-
-@dataclass
-class FrameResult:
-    passes: FramePasses
-    stats: dict
-    selection: object
-    selection_rows: list
-    problems: list = field(default_factory=list)
 
 
 def _timer():
@@ -103,55 +56,6 @@ def _ms(start):
     return (time.perf_counter() - start) * 1000.0
 
 
-class LayerPixels:
-    """The covered pixels of one read-back G-buffer layer; per-pixel terms are computed only
-    for the subsets that get rays."""
-
-    def __init__(self, layer, origin, camera, materials: shading.MaterialTable):
-        self.layer = layer
-        self.flat = np.flatnonzero(layer.covered.ravel())
-        self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
-        self.origin = np.asarray(origin, np.float64)
-        self.element = layer.element.ravel()[self.flat]
-        self.material = np.clip(layer.material.ravel()[self.flat], 0, len(materials.ior) - 1)
-        self.roughness = layer.roughness.ravel()[self.flat]
-        self._normal = layer.normal.reshape(-1, 3)[self.flat]
-        self.camera = camera
-        self.materials = materials
-
-    def __len__(self):
-        return len(self.flat)
-
-    def world(self, index=slice(None)) -> np.ndarray:
-        return self.position[index].astype(np.float64) + self.origin
-
-    def view_directions(self, index=slice(None)) -> np.ndarray:
-        """Unit directions from the camera (perspective) or the camera axis (orthographic)."""
-        position = self.position[index]
-        if self.camera.ortho:
-            return np.broadcast_to(self.camera.forward.astype(np.float32), position.shape).copy()
-        return shading.normalize(position)
-
-    def normals(self, index=slice(None), view_directions=None) -> np.ndarray:
-        """Unit shading normals facing the viewer (flipped where interpolation turned them away)."""
-        normal = shading.normalize(self._normal[index])
-        if view_directions is None:
-            view_directions = self.view_directions(index)
-        back = shading.dot(normal, view_directions) > 0
-        normal[back] *= -1.0
-        return normal
-
-    def geometric_normals(self, index, view_directions) -> np.ndarray:
-        """Face normals facing the camera (where secondary rays leave from: rules of tracer.py)."""
-        return geometric_normals(self.layer, self.flat[index], view_directions)
-
-    def camera_distance(self, index=slice(None)) -> np.ndarray:
-        """Distance from the camera: the size of the points' float32 error, which secondary-ray
-        offsets must exceed (telephoto views)."""
-        position = self.position[index]
-        return np.sqrt(shading.dot(position, position))
-
-
 class FrameRenderer:
     """Renders the frames of one replay, carrying state from frame to frame."""
 
@@ -159,7 +63,7 @@ class FrameRenderer:
         self.threads = threads
         self.cost_model = None
         self.previous_selection = {}
-        self.trace_scene = None
+        self.trace_stage = TraceStage(threads)
         self.frames_rendered = 0
         self.element_bounds = ElementBounds()
         # The error-aware relevance's per-element estimates (phrt_addon/benefit.py).
@@ -167,12 +71,14 @@ class FrameRenderer:
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
-        self._textures = {}  # id(snapshot texture) -> (texture, rules.prepare_texture of it)
+
+    @property
+    def trace_scene(self):
+        """The replay's Embree scenes (None until a frame traced)."""
+        return self.trace_stage.trace_scene
 
     def close(self):
-        if self.trace_scene is not None:
-            self.trace_scene.close()
-            self.trace_scene = None
+        self.trace_stage.close()
 
     # ------------------------------------------------------------------
     def render(self, snapshot: SceneSnapshot, raster: RasterFrame) -> FrameResult:
@@ -192,11 +98,16 @@ class FrameRenderer:
         layers = None
         readback_ms = 0.0
         may_trace = mode != "RASTER" and bool(np.any(candidate & (area_px > 0)))
-        if may_trace:
-            start = _timer()
+        learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+
+        def read_layers():
             gbuffer = raster.gbuffer()
-            layers = {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
-                      "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
+            return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
+                    "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
+
+        if learn_benefit:  # the benefit prior reads the materials under each element's pixels
+            start = _timer()
+            layers = read_layers()
             readback_ms = _ms(start)
         raster_ms = raster.raster_ms + readback_ms
 
@@ -204,9 +115,8 @@ class FrameRenderer:
         start = _timer()
         shadow_lights = [light for light in snapshot.lights if light.cast_shadows]
         element_bounds = self.element_bounds(snapshot)
-        footprint = self._shadow_footprints(layers, snapshot, element_bounds, area_px) \
-            if shadow_lights and layers is not None else np.zeros(n_elements)
-        learn_benefit = mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+        footprint = self._shadow_footprints(raster, snapshot, element_bounds, area_px) \
+            if shadow_lights and may_trace else np.zeros(n_elements)
         flags = {effect: np.array([getattr(e, effect) for e in snapshot.elements], bool)
                  for effect in ("shadows", "reflections", "refractions")}
         expected_benefit = self.benefit_model.benefit(
@@ -239,11 +149,14 @@ class FrameRenderer:
 
         # -- ray tracing ------------------------------------------------------
         start = _timer()
-        counters = _Counters()
-        element_rays = np.zeros(n_elements)
-        traced = None
-        if np.any(selected) and layers is not None:
-            traced = self._trace(snapshot, layers, materials, selected, element_bounds, counters, element_rays)
+        traced_frame = TraceResult(traced=None, element_rays=np.zeros(n_elements))
+        if np.any(selected) and may_trace:
+            if layers is None:  # only a frame that traces reads the layers back (a trace cost)
+                begin = _timer()
+                layers = read_layers()
+                readback_ms = _ms(begin)
+            traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds)
+        traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
 
         # -- lighting and composite (GPU) -----------------------------------------
@@ -319,15 +232,15 @@ class FrameRenderer:
             element=(front + 1).astype(np.float32),
         )
 
-    def _shadow_footprints(self, layers, snapshot, element_bounds, area_px):
+    def _shadow_footprints(self, raster, snapshot, element_bounds, area_px):
         """Estimated shadow-ray count per element (pixels it can shadow, summed over lights),
-        from a 1/FOOTPRINT_STEP^2 sub-sample of the opaque layer."""
+        from a 1/FOOTPRINT_STEP^2 sub-sample of the front surfaces (from the resolve's view
+        depth: no layer is read back before the selection)."""
         n = len(snapshot.elements)
         footprint = np.zeros(n)
-        samples = layers["opaque"]
-        if len(samples) == 0:
+        points = front_points(snapshot.camera, raster.view_depth, FOOTPRINT_STEP)
+        if len(points) == 0:
             return footprint
-        points = samples.world(slice(None, None, FOOTPRINT_STEP * FOOTPRINT_STEP))
         scale = FOOTPRINT_STEP * FOOTPRINT_STEP
         casters = [index for index, element in enumerate(snapshot.elements)
                    if element.is_candidate and element.shadows and area_px[index] > 0
@@ -341,138 +254,35 @@ class FrameRenderer:
         return footprint
 
     # ------------------------------------------------------------------
-    def _prepared_texture(self, texture):
-        """``rules.prepare_texture`` of a snapshot's texture, once per image (bounded)."""
-        entry = self._textures.get(id(texture))
-        if entry is None or entry[0] is not texture:
-            if len(self._textures) >= 64:
-                self._textures.clear()
-            entry = self._textures[id(texture)] = (texture, rules.prepare_texture(texture))
-        return entry[1]
-
-    def _trace(self, snapshot, layers, materials, selected, element_bounds, counters, element_rays) -> TracedTerms:
-        from .tracer import RadianceTracer, TraceScene, leave_surface, reflection_blend
-
-        if self.trace_scene is None:
-            self.trace_scene = TraceScene(self.threads)
-        static_builds = self.trace_scene.stats["static_builds"]
-        update_ms = self.trace_scene.update(snapshot, materials.casts_shadow[:len(snapshot.materials)])
-        # Only a build of the static scene is one-time work; checking that nothing changed and
-        # rebuilding the moving objects' scene recur every frame (the cost model learns them).
-        if self.trace_scene.stats["static_builds"] != static_builds:
-            counters.upload_ms = update_ms
-        scene = self.trace_scene
-        textures = {index: self._prepared_texture(m.texture) for index, m in enumerate(snapshot.materials)
-                    if m.texture is not None}
-        tracer = RadianceTracer(scene, snapshot, materials, textures)
-        elements = snapshot.elements
-        traced = TracedTerms()
-        world = np.asarray(snapshot.world_color, dtype=np.float64)
-        n_elements = len(elements)
-
-        def ray_start(pixels, idx, view_dirs):
-            """Trace-frame points, their geometric normals facing the camera and ray offsets."""
-            points_trace = scene.to_trace(pixels.world(idx))  # only the pixels that get rays
-            normal = pixels.geometric_normals(idx, view_dirs)
-            eps = scene.epsilon(points_trace, pixels.camera_distance(idx), element=pixels.element[idx])
-            return points_trace, normal, eps
-
-        # Shadows: for each light, the pixels a selected caster can shadow get traced visibility.
-        start = _timer()
-        casters = [i for i in np.flatnonzero(selected) if elements[i].shadows and element_bounds[i] is not None]
-        for layer_name, pixels in layers.items():
-            if not casters or len(pixels) == 0:
-                continue
-            points_world = None
-            for light_index, light in enumerate(snapshot.lights):
-                if not light.cast_shadows:
-                    continue
-                if points_world is None:
-                    points_world = pixels.world()
-                index = ShadowRegionIndex(light, points_world)
-                region = np.zeros(len(pixels), bool)
-                for caster in casters:
-                    caster_region = index.region(element_bounds[caster])
-                    element_rays[caster] += np.count_nonzero(caster_region)
-                    region |= caster_region
-                idx = np.flatnonzero(region)
-                if len(idx) == 0:
-                    continue
-                direction, _, _ = shading.light_incidence(light, scene.to_trace(points_world[idx]), scene.origin)
-                view_dirs = pixels.view_directions(idx)
-                facing = shading.dot(pixels.normals(idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
-                idx, direction, view_dirs = idx[facing], direction[facing], view_dirs[facing]
-                if len(idx) == 0:
-                    continue
-                points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
-                _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                blocked = scene.occluded(points_trace + normal * eps[:, None], direction, distance - 2 * eps)
-                traced.shadow_visibility[(layer_name, light_index)] = (
-                    pixels.flat[idx], np.where(blocked, 0.0, 1.0).astype(np.float32))
-                counters.shadow_rays += len(idx)
-        counters.shadow_ms = _ms(start)
-        # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
-        bounces = int(snapshot.settings.max_bounces) >= 1
-
-        # Reflections on selected elements' pixels (mirror direction, blended by roughness).
-        start = _timer()
-        rays_before = tracer.rays + tracer.shadow_rays
-        reflecting = np.array([bool(selected[i]) and elements[i].reflections for i in range(n_elements)] + [False])
-        for layer_name, pixels in layers.items():
-            if not bounces or len(pixels) == 0:
-                continue
-            element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
-            wanted = reflecting[element_of] & (reflection_blend(pixels.roughness) > 0)
-            idx = np.flatnonzero(wanted)
-            if len(idx) == 0:
-                continue
-            view_dirs = pixels.view_directions(idx)
-            points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
-            direction = leave_surface(shading.reflect(view_dirs, pixels.normals(idx, view_dirs)), normal)
-            radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
-            blend = reflection_blend(pixels.roughness[idx])[:, None]
-            traced.reflection[layer_name] = (pixels.flat[idx], blend * radiance + (1.0 - blend) * world)
-            np.add.at(element_rays, element_of[idx], 1)
-        counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
-        counters.reflection_ms = _ms(start)
-
-        # Refractions through selected transparent elements (transparent layer only).
-        start = _timer()
-        rays_before = tracer.rays + tracer.shadow_rays
-        pixels = layers["transparent"]
-        if bounces and len(pixels):
-            refracting = np.array([bool(selected[i]) and elements[i].refractions
-                                   for i in range(n_elements)] + [False])
-            element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
-            wanted = refracting[element_of] & (materials.transmissive[pixels.material] > rules.TRANSPARENT_EPSILON)
-            idx = np.flatnonzero(wanted)
-            if len(idx):
-                view_dirs = pixels.view_directions(idx)
-                points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
-                ior = materials.ior[pixels.material[idx]]
-                direction, _ = shading.refract(view_dirs, pixels.normals(idx, view_dirs), 1.0 / ior)
-                direction = leave_surface(direction, normal, side=-1.0)
-                radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
-                traced.refraction = (pixels.flat[idx], radiance)
-                np.add.at(element_rays, element_of[idx], 1)
-        counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
-        counters.refraction_ms = _ms(start)
-        return traced
 
 
-@dataclass
-class _Counters:
-    shadow_rays: int = 0
-    reflection_rays: int = 0
-    refraction_rays: int = 0
-    shadow_ms: float = 0.0
-    reflection_ms: float = 0.0
-    refraction_ms: float = 0.0
-    upload_ms: float = 0.0
+def front_points(camera, view_depth, step) -> np.ndarray:
+    """World positions (float64) of every ``step``-th pixel in x and y with a surface, from its
+    distance along the view axis: on the pixel's ray, interpolated between its near and far
+    points (exact for perspective and orthographic views alike)."""
+    height, width = view_depth.shape
+    rows = np.arange(step // 2, height, step)
+    cols = np.arange(step // 2, width, step)
+    depth = np.asarray(view_depth, np.float64)[np.ix_(rows, cols)].ravel()
+    ys, xs = np.meshgrid((rows + 0.5) / height * 2.0 - 1.0, (cols + 0.5) / width * 2.0 - 1.0, indexing="ij")
+    covered = np.isfinite(depth)
+    if not np.any(covered):
+        return np.zeros((0, 3))
+    inverse = np.linalg.inv(np.asarray(camera.projection, np.float64) @ camera.view_matrix)
+    ndc = np.stack([xs.ravel()[covered], ys.ravel()[covered]], axis=1)
 
-    @property
-    def rays(self):
-        return self.shadow_rays + self.reflection_rays + self.refraction_rays
+    def unproject(z):
+        clip = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ inverse.T
+        return clip[:, :3] / clip[:, 3:4]
+
+    near, far = unproject(-1.0), unproject(1.0)
+    forward = camera.forward
+    near_depth = (near - camera.position) @ forward
+    far_depth = (far - camera.position) @ forward
+    along = (depth[covered] - near_depth) / np.where(np.abs(far_depth - near_depth) > 1e-30,
+                                                     far_depth - near_depth, 1.0)
+    points = near + (far - near) * along[:, None]
+    return points[np.all(np.isfinite(points), axis=1)]
 
 
 def _rays_per_pixel(snapshot, area_px, footprint):

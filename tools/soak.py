@@ -76,20 +76,20 @@ class ResourceCounter:
     def install(self):
         import gpu
 
-        from phrt.phrt_addon import tracer
+        from phrt.phrt_addon import trace_scene
         for name in self.GPU_TYPES:
             self._wrap(gpu.types, name, name)
         self._wrap(gpu.shader, "create_from_info", "GPUShader")
         # Embree scenes: embreex checks their type, so the tracer's owner of each is wrapped instead.
-        original_init = tracer._EmbreeSet.__init__
+        original_init = trace_scene._EmbreeSet.__init__
 
         def init(embree_set, *args, **kwargs):
             original_init(embree_set, *args, **kwargs)
             self.created["EmbreeScene"] = self.created.get("EmbreeScene", 0) + 1
             self._live.append(("EmbreeScene", embree_set.scene))
 
-        tracer._EmbreeSet.__init__ = init
-        self._restore.append((tracer._EmbreeSet, "__init__", original_init))
+        trace_scene._EmbreeSet.__init__ = init
+        self._restore.append((trace_scene._EmbreeSet, "__init__", original_init))
         return self
 
     def uninstall(self):

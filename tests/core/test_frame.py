@@ -12,7 +12,7 @@ from phrt.phrt_addon.frame import FrameRenderer
 from phrt.phrt_addon.gbuffer import GBuffer, GBufferLayer
 from phrt.phrt_addon.lighting import ReferenceRaster
 from phrt.phrt_addon.scene import Camera, Element, Light, Material, SceneSnapshot, Settings
-from phrt.phrt_addon.tracer import TraceScene
+from phrt.phrt_addon.trace_scene import TraceScene
 
 from test_tracer import box, quad
 
@@ -129,3 +129,20 @@ def test_passes_are_finite_and_the_candidate_pass_leaves_out_k_zero(mode):
     assert result.passes.candidate[mirror].max() == 0.0
     assert result.passes.candidate[block].min() == 1.0
     assert result.passes.selected[mirror].max() == 0.0
+
+
+@pytest.mark.parametrize("step", [1, 8])
+def test_front_points_from_view_depth_are_the_gbuffer_positions(step):
+    """The shadow-footprint estimate reads no layer back: it rebuilds sampled world positions
+    from the resolve's view depth."""
+    from phrt.phrt_addon.frame import front_points
+    snapshot = mirror_scene("HYBRID")
+    gbuffer = ray_cast_gbuffer(snapshot)
+    points = front_points(snapshot.camera, gbuffer.view_depth, step)
+    rows = np.arange(step // 2, HEIGHT, step)
+    cols = np.arange(step // 2, WIDTH, step)
+    position = gbuffer.opaque.position[np.ix_(rows, cols)].reshape(-1, 3)
+    covered = gbuffer.opaque.covered[np.ix_(rows, cols)].ravel()
+    expected = position[covered].astype(np.float64) + snapshot.camera.position
+    assert len(points) == covered.sum() > 20
+    np.testing.assert_allclose(points, expected, atol=1e-3)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
-from phrt.phrt_addon import defaults, heuristic, runlog
+from phrt.phrt_addon import defaults, heuristic, runlog, selection_terms
 from phrt.phrt_addon.cost_model import CostModel
 from phrt.phrt_addon.heuristic import FrameElements, SelectionSettings, select
 
@@ -77,7 +77,7 @@ def test_distance_touching_or_behind_the_camera_is_clamped_to_the_near_plane(dep
 
 def test_default_near_plane_is_blenders_clip_start():
     result = select(frame(1, distance=np.array([0.0])), None, hybrid(), time_left_ms=10, element_ms=np.ones(1))
-    assert result.D[0] == heuristic.NEAR_CLIP_DISTANCE == 0.1
+    assert result.D[0] == selection_terms.NEAR_CLIP_DISTANCE == 0.1
 
 
 def test_far_distance_keeps_visibility_finite_and_ranks_last():
@@ -467,7 +467,7 @@ def test_an_element_whose_visibility_changes_by_less_than_its_hysteresis_margin_
     room = np.max(np.delete(steady.V, index)) - visibility
     change = data.draw(st.floats(-1.0, 1.0)) * 0.5 * min(margin[index], visibility, room)
     new_distance = steady.A[index] * steady.P[index] / ((visibility + change) * steady.terms.visibility_scale)
-    assume(new_distance > heuristic.NEAR_CLIP_DISTANCE * 1.001)
+    assume(new_distance > selection_terms.NEAR_CLIP_DISTANCE * 1.001)
     moved = dict(scene, distance=scene["distance"].copy())
     moved["distance"][index] = new_distance
     after = select(FrameElements(**moved), steady, settings_, time_left_ms=time_left, element_ms=element_ms)

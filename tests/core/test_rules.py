@@ -6,7 +6,7 @@ import pytest
 
 from phrt.phrt_addon import rules, shading
 from phrt.phrt_addon.scene import Element, Material
-from phrt.phrt_addon.tracer import TraceScene
+from phrt.phrt_addon.trace_scene import TraceScene
 
 from test_tracer import box, diffuse, quad, snapshot
 

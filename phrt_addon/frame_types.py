@@ -1,0 +1,118 @@
+"""The data that flows between the stages of a frame (docs/DESIGN.md, "Data flow").
+
+- ``RasterFrame``: the raster half as the core sees it (``engine/raster.GPUFrame`` on the
+  GPU, ``lighting.ReferenceRaster`` in numpy);
+- ``LayerPixels``: the covered pixels of one read-back G-buffer layer, for the rays;
+- ``TracedTerms``: what the trace stage computed, which the lighting and composite use
+  in place of the raster terms;
+- ``FramePasses`` and ``FrameResult``: what a frame gives back.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from . import shading
+from .gbuffer import GBuffer, geometric_normals
+
+
+class RasterFrame(Protocol):
+    width: int
+    height: int
+    raster_ms: float  # G-buffer drawn and read back, shadow maps included
+    setup_ms: float  # the one-time part of raster_ms (compiles, uploads, new shadow maps)
+    front_element: np.ndarray  # (h, w) int, -1 where no element
+    view_depth: np.ndarray  # (h, w) float32 distance along the view axis; inf = background
+    front_normal: np.ndarray  # (h, w, 3) float32
+    stats: dict
+
+    def gbuffer(self) -> GBuffer: ...
+
+    def shade(self, traced: "TracedTerms | None", measure_change: bool = False) -> np.ndarray | None: ...
+
+    def traced_change(self) -> np.ndarray:
+        """(h, w, 4) after ``shade(..., measure_change=True)``: per pixel, the luminance (clipped
+        to [0, 1]) of what the traced reflections and refractions (x) and the traced shadows (y)
+        changed against the raster image."""
+
+
+@dataclass
+class TracedTerms:
+    """What the trace stage computed, by flat pixel index (row 0 at the bottom)."""
+
+    # (layer, light index) -> (pixels, lit fraction): replaces the shadow map there
+    shadow_visibility: dict = field(default_factory=dict)
+    # layer -> (pixels, (n, 3) radiance reflected towards the viewer, blended by roughness)
+    reflection: dict = field(default_factory=dict)
+    # (pixels, (n, 3) radiance arriving through the transparent layer), or None
+    refraction: tuple | None = None
+
+
+@dataclass
+class FramePasses:
+    combined: np.ndarray | None  # (h,w,4) float32, linear, alpha 1; None if left on the GPU
+    depth: np.ndarray  # (h,w) float32 view-axis distance; 1e10 where background
+    normal: np.ndarray  # (h,w,3) float32
+    selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
+    candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
+    element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
+
+
+@dataclass
+class FrameResult:
+    passes: FramePasses
+    stats: dict
+    selection: object
+    selection_rows: list
+    problems: list = field(default_factory=list)
+
+
+class LayerPixels:
+    """The covered pixels of one read-back G-buffer layer; per-pixel terms are computed only
+    for the subsets that get rays."""
+
+    def __init__(self, layer, origin, camera, materials: shading.MaterialTable):
+        self.layer = layer
+        self.flat = np.flatnonzero(layer.covered.ravel())
+        self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
+        self.origin = np.asarray(origin, np.float64)
+        self.element = layer.element.ravel()[self.flat]
+        self.material = np.clip(layer.material.ravel()[self.flat], 0, len(materials.ior) - 1)
+        self.roughness = layer.roughness.ravel()[self.flat]
+        self._normal = layer.normal.reshape(-1, 3)[self.flat]
+        self.camera = camera
+        self.materials = materials
+
+    def __len__(self):
+        return len(self.flat)
+
+    def world(self, index=slice(None)) -> np.ndarray:
+        return self.position[index].astype(np.float64) + self.origin
+
+    def view_directions(self, index=slice(None)) -> np.ndarray:
+        """Unit directions from the camera (perspective) or the camera axis (orthographic)."""
+        position = self.position[index]
+        if self.camera.ortho:
+            return np.broadcast_to(self.camera.forward.astype(np.float32), position.shape).copy()
+        return shading.normalize(position)
+
+    def normals(self, index=slice(None), view_directions=None) -> np.ndarray:
+        """Unit shading normals facing the viewer (flipped where interpolation turned them away)."""
+        normal = shading.normalize(self._normal[index])
+        if view_directions is None:
+            view_directions = self.view_directions(index)
+        back = shading.dot(normal, view_directions) > 0
+        normal[back] *= -1.0
+        return normal
+
+    def geometric_normals(self, index, view_directions) -> np.ndarray:
+        """Face normals facing the camera (where secondary rays leave from: rules of tracer.py)."""
+        return geometric_normals(self.layer, self.flat[index], view_directions)
+
+    def camera_distance(self, index=slice(None)) -> np.ndarray:
+        """Distance from the camera: the size of the points' float32 error, which secondary-ray
+        offsets must exceed (telephoto views)."""
+        position = self.position[index]
+        return np.sqrt(shading.dot(position, position))
