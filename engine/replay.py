@@ -198,7 +198,7 @@ class SteppedReplay:
         self.settings.mode = mode
         # A budget given here holds for the whole replay; otherwise the scene's (possibly
         # animated) budget is read at every frame.
-        self._budget_fixed = budget_ms is not None
+        self._budget_fixed = budget_ms is not None or "budget_ms" in (overrides or {})
         if budget_ms is not None:
             self.settings.budget_ms = float(budget_ms)
         render = scene.render

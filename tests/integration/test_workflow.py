@@ -705,3 +705,14 @@ def test_view_draw_draws_the_frame_over_the_region_and_renders_again_only_on_cha
     assert textures[2][1] == textures[1][1] + 1  # view_update: rendered again
     image = drawn[::-1, :, :3]
     assert np.abs(image - rgb(final_render)).mean() < 0.01  # half-float target of the same frame
+
+
+def test_a_budget_given_as_an_override_holds_for_the_whole_replay(scene, tmp_path):
+    """overrides={'budget_ms': ...} is a fixed budget like budget_ms=..., not replaced by the
+    scene's (possibly animated) budget read at every frame."""
+    scene.phrt.budget_ms = 5000.0
+    camera = scene.camera
+    result = replay.replay(scene, camera, (1, 3), "HYBRID", tmp_path / "run", images="none",
+                           overrides={"budget_ms": 7.0})
+    budgets = {row["budget_ms"] for row in runlog.read_frames(result.run_dir)}
+    assert budgets == {7.0}
