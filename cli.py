@@ -161,18 +161,11 @@ def command_scenes(args):
     return 0
 
 
-def command_render(args):
-    from .engine import replay as replay_module  # noqa: F401  (imports bpy)
-    if args.mode not in ("raster", "hybrid", "raytrace"):
-        raise UserError(f"unknown mode '{args.mode}': use raster, hybrid or raytrace")
-    if args.images not in ("exr", "png", "none"):
-        raise UserError(f"unknown image format '{args.images}': use exr, png or none")
-    if args.budget_ms is not None and args.budget_ms < 0:
-        raise UserError(f"negative budget {args.budget_ms:g} ms: give --budget-ms a value >= 0")
-    check_budget_at(args.budget_at)
-    if args.budget_ms is not None and args.budget_at is not None:
-        raise UserError("--budget-ms and --budget-at both given: give the budget one way")
-    resolution = parse_resolution(args.resolution)
+def _open_path(args):
+    """The replay arguments every command that renders a path shares: the frame range's syntax and
+    the output folder are checked before anything is loaded, then the scene is opened and its
+    camera path and frame range found.  Returns (label, scene, camera, frame range)."""
+    from .engine import replay as replay_module
     if args.frames is not None:
         try:
             replay_module.parse_frames(args.frames, (1, 1))  # syntax check before loading anything
@@ -188,6 +181,22 @@ def command_render(args):
         frame_range = replay_module.parse_frames(args.frames, replay_module.path_frame_range(scene, camera))
     except replay_module.ReplayError as error:
         raise UserError(str(error)) from None
+    return label, scene, camera, frame_range
+
+
+def command_render(args):
+    from .engine import replay as replay_module  # noqa: F401  (imports bpy)
+    if args.mode not in ("raster", "hybrid", "raytrace"):
+        raise UserError(f"unknown mode '{args.mode}': use raster, hybrid or raytrace")
+    if args.images not in ("exr", "png", "none"):
+        raise UserError(f"unknown image format '{args.images}': use exr, png or none")
+    if args.budget_ms is not None and args.budget_ms < 0:
+        raise UserError(f"negative budget {args.budget_ms:g} ms: give --budget-ms a value >= 0")
+    check_budget_at(args.budget_at)
+    if args.budget_ms is not None and args.budget_at is not None:
+        raise UserError("--budget-ms and --budget-at both given: give the budget one way")
+    resolution = parse_resolution(args.resolution)
+    label, scene, camera, frame_range = _open_path(args)
     out = Path(args.out) if args.out else replay_module.default_run_dir("out", label, camera.name, args.mode)
     _check_output_dir(out)
     progress = _progress(sys.stderr)
@@ -252,7 +261,6 @@ def _budget_fractions(args):
 
 
 def command_sweep(args):
-    from .engine import replay as replay_module
     from .phrt_addon import oracle as oracle_module
     from .phrt_addon import plan as plan_module
     _check_executor_options(args.workers, args.scheduler)
@@ -265,21 +273,7 @@ def command_sweep(args):
             raise UserError(f"unknown selection variant(s) {', '.join(unknown) or repr(args.variants)}: use some of "
                             f"{', '.join(plan_module.VARIANTS)}")
     resolution = parse_resolution(args.resolution)
-    if args.frames is not None:
-        try:
-            replay_module.parse_frames(args.frames, (1, 1))
-        except replay_module.ReplayError as error:
-            raise UserError(str(error)) from None
-    if args.out is not None:
-        _check_output_dir(args.out)
-    label = load_scene(args.scene)
-    import bpy
-    scene = bpy.context.scene
-    try:
-        camera = replay_module.find_path(scene, args.path)
-        frame_range = replay_module.parse_frames(args.frames, replay_module.path_frame_range(scene, camera))
-    except replay_module.ReplayError as error:
-        raise UserError(str(error)) from None
+    label, scene, camera, frame_range = _open_path(args)
     from .engine import extract
     resolution = resolution or extract.resolution(scene)
     folder = Path(args.out) if args.out else Path("out") / f"{label}-{camera.name}-sweep"
