@@ -98,17 +98,24 @@ class ResourceCounter:
         self._restore = []
 
     def collect(self):
-        """Count the objects nothing else refers to any more as freed (and let them go)."""
-        gc.collect()
-        still = []
-        for kind, made in self._live:
-            # References: the list entry, the loop variable and getrefcount's argument.
-            if sys.getrefcount(made) <= 3:
-                self.freed[kind] = self.freed.get(kind, 0) + 1
-            else:
-                still.append((kind, made))
-        self._live = still
-        return len(still)
+        """Count the objects nothing else refers to any more as freed (and let them go).  Repeated
+        until nothing more goes: a batch let go here releases the vertex and index buffers it held,
+        which an earlier look in the same pass still saw referenced."""
+        while True:
+            gc.collect()
+            still = []
+            made = None
+            for kind, made in self._live:
+                # References: the list entry, the loop variable and getrefcount's argument.
+                if sys.getrefcount(made) <= 3:
+                    self.freed[kind] = self.freed.get(kind, 0) + 1
+                else:
+                    still.append((kind, made))
+            del made
+            released = len(self._live) - len(still)
+            self._live = still
+            if released == 0:
+                return len(still)
 
     def report(self):
         kinds = sorted(set(self.created) | set(self.freed))
