@@ -474,53 +474,49 @@ def build_shadow(gpu):
     return gpu.shader.create_from_info(info)
 
 
-def build_lighting(gpu, normal_offset_texels, depth_bias_texels):
+def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, uniform_blocks=(("CameraData", "camera"),),
+                     layers=None, defines=None, measure_change=False):
+    """A shader drawn over the whole frame (``FULLSCREEN_VERT``) that reads the G-buffer layers:
+    ``layers`` are ``_layer_samplers`` keywords, ``samplers`` the FLOAT_2D samplers after them,
+    ``outputs`` (type, name) per colour target, ``defines`` (normal offset, depth bias) for
+    ``_defines``."""
     info = gpu.types.GPUShaderCreateInfo()
-    info.typedef_source(CAMERA_STRUCT + LIGHT_STRUCT)
-    info.uniform_buf(0, "CameraData", "camera")
-    info.uniform_buf(1, "LightData", "light")
-    slot = _layer_samplers(info, 0)
-    info.sampler(slot, "FLOAT_2D", "material_table")
-    info.sampler(slot + 1, "FLOAT_2D", "shadow_map")
-    info.sampler(slot + 2, "FLOAT_2D", "opaque_visibility")
-    info.sampler(slot + 3, "FLOAT_2D", "transparent_visibility")
-    _defines(info, normal_offset_texels, depth_bias_texels)
-    info.push_constant("INT", "measure_change")
+    info.typedef_source(typedefs)
+    for slot, (type_name, name) in enumerate(uniform_blocks):
+        info.uniform_buf(slot, type_name, name)
+    slot = _layer_samplers(info, 0, **(layers or {}))
+    for offset, name in enumerate(samplers):
+        info.sampler(slot + offset, "FLOAT_2D", name)
+    if defines is not None:
+        _defines(info, *defines)
+    if measure_change:
+        info.push_constant("INT", "measure_change")
     info.vertex_in(0, "VEC2", "pos")
-    info.fragment_out(0, "VEC4", "out_opaque")
-    info.fragment_out(1, "VEC4", "out_transparent")
-    info.fragment_out(2, "VEC4", "out_change")
+    for index, (type_name, name) in enumerate(outputs):
+        info.fragment_out(index, type_name, name)
     info.vertex_source(FULLSCREEN_VERT)
-    info.fragment_source(COMMON_LIB + LIGHTING_FRAG)
+    info.fragment_source(fragment_source)
     return gpu.shader.create_from_info(info)
+
+
+def build_lighting(gpu, normal_offset_texels, depth_bias_texels):
+    return _fullscreen_pass(
+        gpu, CAMERA_STRUCT + LIGHT_STRUCT,
+        ("material_table", "shadow_map", "opaque_visibility", "transparent_visibility"),
+        (("VEC4", "out_opaque"), ("VEC4", "out_transparent"), ("VEC4", "out_change")),
+        COMMON_LIB + LIGHTING_FRAG, uniform_blocks=(("CameraData", "camera"), ("LightData", "light")),
+        defines=(normal_offset_texels, depth_bias_texels), measure_change=True)
 
 
 def build_resolve(gpu):
-    info = gpu.types.GPUShaderCreateInfo()
-    info.typedef_source(CAMERA_STRUCT)
-    info.uniform_buf(0, "CameraData", "camera")
-    _layer_samplers(info, 0, with_albedo=False, with_element=True)
-    info.vertex_in(0, "VEC2", "pos")
-    info.fragment_out(0, "VEC4", "out_normal_depth")
-    info.fragment_out(1, "UINT", "out_element")
-    info.vertex_source(FULLSCREEN_VERT)
-    info.fragment_source(RESOLVE_FRAG)
-    return gpu.shader.create_from_info(info)
+    return _fullscreen_pass(gpu, CAMERA_STRUCT, (), (("VEC4", "out_normal_depth"), ("UINT", "out_element")),
+                            RESOLVE_FRAG, layers={"with_albedo": False, "with_element": True})
 
 
 def build_composite(gpu, normal_offset_texels, depth_bias_texels):
-    info = gpu.types.GPUShaderCreateInfo()
-    info.typedef_source(CAMERA_STRUCT)
-    info.uniform_buf(0, "CameraData", "camera")
-    slot = _layer_samplers(info, 0)
-    for offset, name in enumerate(("material_table", "opaque_light", "transparent_light", "opaque_reflection",
-                                   "transparent_reflection", "refraction", "shadow_change")):
-        info.sampler(slot + offset, "FLOAT_2D", name)
-    _defines(info, normal_offset_texels, depth_bias_texels)
-    info.push_constant("INT", "measure_change")
-    info.vertex_in(0, "VEC2", "pos")
-    info.fragment_out(0, "VEC4", "out_combined")
-    info.fragment_out(1, "VEC4", "out_change")
-    info.vertex_source(FULLSCREEN_VERT)
-    info.fragment_source(COMMON_LIB + COMPOSITE_FRAG)
-    return gpu.shader.create_from_info(info)
+    return _fullscreen_pass(
+        gpu, CAMERA_STRUCT,
+        ("material_table", "opaque_light", "transparent_light", "opaque_reflection", "transparent_reflection",
+         "refraction", "shadow_change"),
+        (("VEC4", "out_combined"), ("VEC4", "out_change")),
+        COMMON_LIB + COMPOSITE_FRAG, defines=(normal_offset_texels, depth_bias_texels), measure_change=True)

@@ -39,3 +39,12 @@ def render_exr(blender, tmp_path):
         blender.ops.render.render(write_still=True)
         return tmp_path / f"{name}.exr"
     return render
+
+
+@pytest.fixture
+def fresh_caches(blender):
+    """Each test starts and ends with nothing cached (GPU resources, Embree scenes, meshes)."""
+    from phrt.engine import final
+    final.release_caches()
+    yield
+    final.release_caches()

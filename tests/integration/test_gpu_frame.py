@@ -21,8 +21,7 @@ import pytest  # noqa: E402
 
 bpy = pytest.importorskip("bpy")
 
-import phrt  # noqa: E402
-from phrt.engine import extract, final, gpu_resources, raster, session  # noqa: E402
+from phrt.engine import extract, final, raster, session  # noqa: E402
 from phrt.phrt_addon import lighting  # noqa: E402
 from phrt.phrt_addon.frame import TracedTerms  # noqa: E402
 from phrt.phrt_addon.scene import Element, Material, MeshInstance  # noqa: E402
@@ -34,18 +33,8 @@ WIDTH, HEIGHT = 160, 120
 SCENE_KINDS = ("mesh", "texture", "material_table", "shadow_map", "target")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def registered():
-    if not hasattr(bpy.types.Scene, "phrt"):
-        phrt.register()
-    yield
-
-
-@pytest.fixture(autouse=True)
-def fresh_caches():
-    final.release_caches()
-    yield
-    final.release_caches()
+# Registered once (conftest's ``blender``); every test starts with nothing cached.
+pytestmark = pytest.mark.usefixtures("fresh_caches")
 
 
 def lit_scene():

@@ -17,7 +17,6 @@ import pytest  # noqa: E402
 
 bpy = pytest.importorskip("bpy")
 
-import phrt  # noqa: E402
 from phrt import compat  # noqa: E402
 from phrt.engine import extract, final  # noqa: E402
 from phrt.phrt_addon import metrics, shading  # noqa: E402
@@ -26,18 +25,8 @@ from phrt.sample_scenes import showcase  # noqa: E402
 MODES = ("RASTER", "HYBRID", "RAYTRACE")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def registered():
-    if not hasattr(bpy.types.Scene, "phrt"):
-        phrt.register()
-    yield
-
-
-@pytest.fixture(autouse=True)
-def fresh_caches():
-    final.release_caches()
-    yield
-    final.release_caches()
+# Registered once (conftest's ``blender``); every test starts with nothing cached.
+pytestmark = pytest.mark.usefixtures("fresh_caches")
 
 
 # -- rendering and reading back ------------------------------------------------------------------

@@ -17,7 +17,6 @@ import pytest  # noqa: E402
 
 bpy = pytest.importorskip("bpy")
 
-import phrt  # noqa: E402
 from phrt.engine import final, replay, session  # noqa: E402
 from phrt.engine import oracle as oracle_engine  # noqa: E402
 from phrt.phrt_addon import metrics, oracle, runlog  # noqa: E402
@@ -28,18 +27,8 @@ from phrt.sample_scenes import showcase as build  # noqa: E402
 REGRET_TOLERANCE = 0.002
 
 
-@pytest.fixture(scope="module", autouse=True)
-def registered():
-    if not hasattr(bpy.types.Scene, "phrt"):
-        phrt.register()
-    yield
-
-
-@pytest.fixture(autouse=True)
-def fresh_caches():
-    final.release_caches()
-    yield
-    final.release_caches()
+# Registered once (conftest's ``blender``); every test starts with nothing cached.
+pytestmark = pytest.mark.usefixtures("fresh_caches")
 
 
 def mirror_scene(second="matte", relevance="PAPER"):
