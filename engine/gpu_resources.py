@@ -233,7 +233,8 @@ class GPUResources:
         "opaque_position": "RGBA32F", "opaque_normal": "RGBA32F", "opaque_albedo": "RGBA8",
         "opaque_element": "R32UI", "opaque_depth": "DEPTH_COMPONENT32F",
         "transparent_position": "RGBA32F", "transparent_normal": "RGBA32F", "transparent_albedo": "RGBA8",
-        "transparent_element": "R32UI", "transparent_depth": "DEPTH_COMPONENT32F",
+        "transparent_element": "R32UI",
+        "transparent_mask": "DEPTH_COMPONENT32F",  # 0 where the transparent layer covers a pixel, else 1
         "normal_depth": "RGBA32F", "front_element": "R32UI",
         "opaque_light": "RGBA32F", "transparent_light": "RGBA32F", "combined": "RGBA32F",
         "shadow_change": "RGBA32F", "traced_change": "RGBA32F",  # the error-aware relevance only

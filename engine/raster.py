@@ -240,15 +240,18 @@ class GPUFrame:
                 shader.uniform_sampler("base_tex", texture if texture is not None else white)
                 batch.draw(shader)
 
-    def _fullscreen(self, gpu, name, framebuffer, bind):
+    def _fullscreen(self, gpu, name, framebuffer, bind, write_depth=False):
         shader = self._shaders[name]
         with framebuffer.bind():
             gpu.state.viewport_set(0, 0, self.width, self.height)
-            gpu.state.depth_test_set("NONE")
-            gpu.state.depth_mask_set(False)
+            # Depth is written only with the test on ("ALWAYS"); the shader sets gl_FragDepth.
+            gpu.state.depth_test_set("ALWAYS" if write_depth else "NONE")
+            gpu.state.depth_mask_set(write_depth)
             shader.bind()
             bind(shader)
             self.resources.fullscreen_batch(shader).draw(shader)
+            gpu.state.depth_test_set("NONE")
+            gpu.state.depth_mask_set(False)
 
     def _bind_layers(self, shader, albedo=True, element=False):
         for layer in ("opaque", "transparent"):
@@ -258,7 +261,10 @@ class GPUFrame:
 
     def _resolve(self, gpu):
         targets = self.targets
-        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(targets["normal_depth"], targets["front_element"]))
+        # Also writes the transparent layer's mask (depth 0 where it covers the pixel) that the
+        # lighting passes of that layer are depth-tested against.
+        framebuffer = gpu.types.GPUFrameBuffer(depth_slot=targets["transparent_mask"],
+                                               color_slots=(targets["normal_depth"], targets["front_element"]))
         camera_ubo = self._camera_ubo(gpu)
 
         def bind(shader):
@@ -266,7 +272,7 @@ class GPUFrame:
             self._bind_layers(shader, albedo=False, element=True)
 
         gpu.state.blend_set("NONE")
-        self._fullscreen(gpu, "resolve", framebuffer, bind)
+        self._fullscreen(gpu, "resolve", framebuffer, bind, write_depth=True)
         normal_depth = self._read(gpu, framebuffer, 0, "FLOAT", 4)
         element = self._read(gpu, framebuffer, 1, "UINT", 1)
         depth = normal_depth[..., 3]
@@ -419,44 +425,53 @@ class GPUFrame:
         return values
 
     def _light(self, gpu, uploads):
+        """Adds each light to each layer's light target: one full-screen pass per light and layer;
+        the transparent layer's passes are depth-tested against its mask, so they shade only
+        the pixels it covers (llvmpipe, like a GPU, skips tiles that fail an early depth test,
+        where a branch in the shader would run masked over every pixel)."""
         targets = self.targets
-        slots = (targets["opaque_light"], targets["transparent_light"])
-        if self._measure:
-            slots += (targets["shadow_change"],)  # without the attachment, out_change is discarded
-        framebuffer = gpu.types.GPUFrameBuffer(color_slots=slots)
-        with framebuffer.bind():
-            framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
         lights = self.snapshot.lights
+        layers = ("opaque", "transparent") if self._transparent_drawn else ("opaque",)
+        framebuffers = {}
+        for layer in ("opaque", "transparent"):
+            slots = (targets[f"{layer}_light"],)
+            if self._measure:
+                slots += (targets["shadow_change"],)  # without the attachment, out_change is discarded
+            framebuffers[layer] = gpu.types.GPUFrameBuffer(
+                color_slots=slots, depth_slot=targets["transparent_mask"] if layer == "transparent" else None)
+            with framebuffers[layer].bind():
+                framebuffers[layer].clear(color=(0.0, 0.0, 0.0, 0.0))
         if not lights:
             return
         camera_ubo = self._camera_ubo(gpu)
         no_visibility = self.resources.placeholder(-1.0)
         shader = self._shaders["lighting"]
+        batch = self.resources.fullscreen_batch(shader)
+        # Referenced until drawn: a dropped UBO reads as zeros.
+        light_ubos = [_ubo(gpu, self._light_ubo(gpu, index, light)) for index, light in enumerate(lights)]
         gpu.state.blend_set("ADDITIVE_PREMULT")
         try:
-            with framebuffer.bind():
-                gpu.state.viewport_set(0, 0, self.width, self.height)
-                gpu.state.depth_test_set("NONE")
-                gpu.state.depth_mask_set(False)
-                shader.bind()
-                shader.uniform_block("camera", camera_ubo)
-                self._bind_layers(shader)
-                shader.uniform_sampler("material_table", self.material_table)
-                shader.uniform_int("measure_change", int(self._measure))
-                batch = self.resources.fullscreen_batch(shader)
-                for index, light in enumerate(lights):
-                    values = self._light_ubo(gpu, index, light)
-                    opaque = uploads["visibility"].get(("opaque", index))
-                    transparent = uploads["visibility"].get(("transparent", index))
-                    values[120 + 15] = (opaque is not None) + 2 * (transparent is not None)
-                    atlas = self.atlases.get(index)
-                    light_ubo = _ubo(gpu, values)  # referenced until drawn: a dropped UBO reads as zeros
-                    shader.uniform_block("light", light_ubo)
-                    shader.uniform_sampler("shadow_map", atlas.texture if atlas is not None else no_visibility)
-                    shader.uniform_sampler("opaque_visibility", opaque if opaque is not None else no_visibility)
-                    shader.uniform_sampler("transparent_visibility",
-                                           transparent if transparent is not None else no_visibility)
-                    batch.draw(shader)
+            for layer in layers:
+                with framebuffers[layer].bind():
+                    gpu.state.viewport_set(0, 0, self.width, self.height)
+                    # The full-screen triangle sits at depth 0.5: it passes where the mask is 0.
+                    gpu.state.depth_test_set("GREATER" if layer == "transparent" else "NONE")
+                    gpu.state.depth_mask_set(False)
+                    shader.bind()
+                    shader.uniform_block("camera", camera_ubo)
+                    for name in ("position", "normal", "albedo"):
+                        shader.uniform_sampler(f"layer_{name}", targets[f"{layer}_{name}"])
+                    shader.uniform_sampler("material_table", self.material_table)
+                    shader.uniform_int("measure_change", int(self._measure))
+                    for index, light in enumerate(lights):
+                        visibility = uploads["visibility"].get((layer, index))
+                        atlas = self.atlases.get(index)
+                        shader.uniform_block("light", light_ubos[index])
+                        shader.uniform_int("traced_layer", int(visibility is not None))
+                        shader.uniform_sampler("shadow_map", atlas.texture if atlas is not None else no_visibility)
+                        shader.uniform_sampler("visibility", visibility if visibility is not None else no_visibility)
+                        batch.draw(shader)
+                    gpu.state.depth_test_set("NONE")
         finally:
             gpu.state.blend_set("NONE")
 

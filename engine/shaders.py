@@ -281,27 +281,18 @@ vec3 light_layer(Surface s, float traced_visibility, inout float change) {
   return unshadowed * visibility;
 }
 
+/* One layer per pass: the transparent layer's passes are drawn only where it covers the pixel
+   (depth-tested against the mask the resolve pass writes), so a frame pays for glass only
+   where there is glass. */
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
-  /* Traced lit fractions uploaded for this light: 1 opaque layer, 2 transparent layer. */
-  int traced = int(light.spot.w + 0.5);
-  out_opaque = vec4(0.0);
-  out_transparent = vec4(0.0);
+  out_light = vec4(0.0);
   float change = 0.0;
-  /* A layer's other targets are read only where it covers the pixel (the transparent layer
-     rarely does). */
-  vec4 position = texelFetch(opaque_position, pixel, 0);
+  vec4 position = texelFetch(layer_position, pixel, 0);
   if (position.w > 0.5) {
-    Surface opaque = read_surface(position, texelFetch(opaque_normal, pixel, 0), texelFetch(opaque_albedo, pixel, 0));
-    out_opaque.rgb = light_layer(opaque, (traced & 1) != 0 ? texelFetch(opaque_visibility, pixel, 0).r : -1.0,
-                                 change);
-  }
-  position = texelFetch(transparent_position, pixel, 0);
-  if (position.w > 0.5) {
-    Surface transparent = read_surface(position, texelFetch(transparent_normal, pixel, 0),
-                                       texelFetch(transparent_albedo, pixel, 0));
-    out_transparent.rgb = light_layer(transparent, (traced & 2) != 0 ? texelFetch(transparent_visibility, pixel, 0).r
-                                                                     : -1.0, change);
+    Surface s = read_surface(position, texelFetch(layer_normal, pixel, 0), texelFetch(layer_albedo, pixel, 0));
+    /* traced_layer: the tracer's lit fractions for this light and layer were uploaded. */
+    out_light.rgb = light_layer(s, traced_layer != 0 ? texelFetch(visibility, pixel, 0).r : -1.0, change);
   }
   out_change = vec4(0.0, change, 0.0, 0.0);
 }
@@ -320,6 +311,8 @@ void main() {
   out_normal_depth = vec4(front.w > 0.5 ? normal : vec3(0.0), depth);
   out_element = front_transparent ? texelFetch(transparent_element, pixel, 0).r
                                   : texelFetch(opaque_element, pixel, 0).r;
+  /* The transparent layer's mask for the lighting passes: near where it covers the pixel. */
+  gl_FragDepth = front_transparent ? 0.0 : 1.0;
 }
 """
 
@@ -404,7 +397,7 @@ struct LightData {
   vec4 color_kind;         /* linear colour * strength, kind code */
   vec4 position_radius;    /* camera-relative position, soft radius (>= 1e-3) */
   vec4 direction;          /* unit direction the light travels */
-  vec4 spot;               /* cos outer, cos inner, casts shadows, traced layers (1 opaque + 2 transparent) */
+  vec4 spot;               /* cos outer, cos inner, casts shadows, unused */
   vec4 shadow_offset;      /* camera position - view origin, number of views (0: no map) */
   vec4 shadow_params;      /* texel angle, near, orthographic, view size in texels */
 };
@@ -475,7 +468,7 @@ def build_shadow(gpu):
 
 
 def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, uniform_blocks=(("CameraData", "camera"),),
-                     layers=None, defines=None, measure_change=False):
+                     layers=None, defines=None, measure_change=False, depth_write=None):
     """A shader drawn over the whole frame (``FULLSCREEN_VERT``) that reads the G-buffer layers:
     ``layers`` are ``_layer_samplers`` keywords, ``samplers`` the FLOAT_2D samplers after them,
     ``outputs`` (type, name) per colour target, ``defines`` (normal offset, depth bias) for
@@ -491,6 +484,8 @@ def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, unifo
         _defines(info, *defines)
     if measure_change:
         info.push_constant("INT", "measure_change")
+    if depth_write is not None:
+        info.depth_write(depth_write)
     info.vertex_in(0, "VEC2", "pos")
     for index, (type_name, name) in enumerate(outputs):
         info.fragment_out(index, type_name, name)
@@ -500,17 +495,28 @@ def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, unifo
 
 
 def build_lighting(gpu, normal_offset_texels, depth_bias_texels):
-    return _fullscreen_pass(
-        gpu, CAMERA_STRUCT + LIGHT_STRUCT,
-        ("material_table", "shadow_map", "opaque_visibility", "transparent_visibility"),
-        (("VEC4", "out_opaque"), ("VEC4", "out_transparent"), ("VEC4", "out_change")),
-        COMMON_LIB + LIGHTING_FRAG, uniform_blocks=(("CameraData", "camera"), ("LightData", "light")),
-        defines=(normal_offset_texels, depth_bias_texels), measure_change=True)
+    """One light over one G-buffer layer (bound as ``layer_*``), added to its light target."""
+    info = gpu.types.GPUShaderCreateInfo()
+    info.typedef_source(CAMERA_STRUCT + LIGHT_STRUCT)
+    info.uniform_buf(0, "CameraData", "camera")
+    info.uniform_buf(1, "LightData", "light")
+    for slot, name in enumerate(("layer_position", "layer_normal", "layer_albedo", "material_table", "shadow_map",
+                                 "visibility")):
+        info.sampler(slot, "FLOAT_2D", name)
+    _defines(info, normal_offset_texels, depth_bias_texels)
+    info.push_constant("INT", "measure_change")
+    info.push_constant("INT", "traced_layer")
+    info.vertex_in(0, "VEC2", "pos")
+    info.fragment_out(0, "VEC4", "out_light")
+    info.fragment_out(1, "VEC4", "out_change")
+    info.vertex_source(FULLSCREEN_VERT)
+    info.fragment_source(COMMON_LIB + LIGHTING_FRAG)
+    return gpu.shader.create_from_info(info)
 
 
 def build_resolve(gpu):
     return _fullscreen_pass(gpu, CAMERA_STRUCT, (), (("VEC4", "out_normal_depth"), ("UINT", "out_element")),
-                            RESOLVE_FRAG, layers={"with_albedo": False, "with_element": True})
+                            RESOLVE_FRAG, layers={"with_albedo": False, "with_element": True}, depth_write="ANY")
 
 
 def build_composite(gpu, normal_offset_texels, depth_bias_texels):
