@@ -106,10 +106,15 @@ class GPUResources:
             builders = {
                 "gbuffer": lambda: shaders.build_gbuffer(gpu),
                 "shadow": lambda: shaders.build_shadow(gpu),
-                "lighting": lambda: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
                 "resolve": lambda: shaders.build_resolve(gpu),
                 "composite": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
+                "composite_opaque": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS,
+                                                                    with_transparent=False),
             }
+            # "lighting<n>": n lights added per pass (the variants a frame's light count needs)
+            builders.update({f"lighting{n}": (lambda n=n: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS,
+                                                                                 DEPTH_BIAS_TEXELS, n))
+                             for n in range(1, shaders.LIGHTS_PER_PASS + 1)})
             shader = self._shaders[name] = builders[name]()
             self.created["shader"] += 1
         return shader

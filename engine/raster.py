@@ -37,6 +37,10 @@ from .gpu_resources import GPUResources, ShadowAtlas, gpu_module
 MAX_MATERIALS = (1 << 24) - 1
 
 
+# shaders.LIGHT_STRUCT: 6 view-projections, 6 axes, 6 vec4s.
+LIGHT_UBO_FLOATS = 6 * 16 + 6 * 4 + 6 * 4
+
+
 def _matrix_list(matrix) -> list:
     """Row-major 4x4 -> the column-major flat list GLSL expects."""
     return np.asarray(matrix, dtype=np.float32).T.ravel().tolist()
@@ -99,8 +103,12 @@ class GPUFrame:
         start = time.perf_counter()
         created_before = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
         setup_start = time.perf_counter()
-        self._shaders = {name: self.resources.shader(name) for name in ("gbuffer", "resolve", "lighting",
-                                                                        "composite", "shadow")}
+        self._shaders = {name: self.resources.shader(name) for name in ("gbuffer", "resolve", "composite",
+                                                                        "composite_opaque", "shadow")}
+        per_pass = shaders.LIGHTS_PER_PASS
+        for count in {min(per_pass, len(self.snapshot.lights) - first)
+                      for first in range(0, len(self.snapshot.lights), per_pass)}:
+            self._shaders[f"lighting{count}"] = self.resources.shader(f"lighting{count}")
         self.targets = self.resources.targets(self.width, self.height)
         self.material_table = self.resources.material_table(self.materials)
         self._draw_list = []
@@ -240,12 +248,14 @@ class GPUFrame:
                 shader.uniform_sampler("base_tex", texture if texture is not None else white)
                 batch.draw(shader)
 
-    def _fullscreen(self, gpu, name, framebuffer, bind, write_depth=False):
+    def _fullscreen(self, gpu, name, framebuffer, bind, write_depth=False, depth_test="NONE"):
+        """One full-screen pass; ``write_depth``: the shader's gl_FragDepth is kept; ``depth_test``:
+        the pass (at depth 0.5) is drawn where it passes the attached depth."""
         shader = self._shaders[name]
         with framebuffer.bind():
             gpu.state.viewport_set(0, 0, self.width, self.height)
             # Depth is written only with the test on ("ALWAYS"); the shader sets gl_FragDepth.
-            gpu.state.depth_test_set("ALWAYS" if write_depth else "NONE")
+            gpu.state.depth_test_set("ALWAYS" if write_depth else depth_test)
             gpu.state.depth_mask_set(write_depth)
             shader.bind()
             bind(shader)
@@ -399,7 +409,7 @@ class GPUFrame:
 
     def _light_ubo(self, gpu, index, light):
         camera_position = self.snapshot.camera.position
-        values = np.zeros((6 * 16 + 6 * 4 + 6 * 4,), np.float32)
+        values = np.zeros((LIGHT_UBO_FLOATS,), np.float32)
         atlas = self.atlases.get(index) if light.cast_shadows else None
         if atlas is not None:
             for face, view in enumerate(atlas.views):
@@ -445,10 +455,16 @@ class GPUFrame:
             return
         camera_ubo = self._camera_ubo(gpu)
         no_visibility = self.resources.placeholder(-1.0)
-        shader = self._shaders["lighting"]
-        batch = self.resources.fullscreen_batch(shader)
-        # Referenced until drawn: a dropped UBO reads as zeros.
-        light_ubos = [_ubo(gpu, self._light_ubo(gpu, index, light)) for index, light in enumerate(lights)]
+        per_pass = shaders.LIGHTS_PER_PASS
+        groups = []  # (shader, its batch, the lights' UBO, light indices) per pass
+        for first in range(0, len(lights), per_pass):
+            indices = range(first, min(first + per_pass, len(lights)))
+            values = np.zeros((per_pass, LIGHT_UBO_FLOATS), np.float32)
+            for slot, index in enumerate(indices):
+                values[slot] = self._light_ubo(gpu, index, lights[index])
+            shader = self._shaders[f"lighting{len(indices)}"]
+            # Referenced until drawn: a dropped UBO reads as zeros.
+            groups.append((shader, self.resources.fullscreen_batch(shader), _ubo(gpu, values.ravel()), indices))
         gpu.state.blend_set("ADDITIVE_PREMULT")
         try:
             for layer in layers:
@@ -457,19 +473,24 @@ class GPUFrame:
                     # The full-screen triangle sits at depth 0.5: it passes where the mask is 0.
                     gpu.state.depth_test_set("GREATER" if layer == "transparent" else "NONE")
                     gpu.state.depth_mask_set(False)
-                    shader.bind()
-                    shader.uniform_block("camera", camera_ubo)
-                    for name in ("position", "normal", "albedo"):
-                        shader.uniform_sampler(f"layer_{name}", targets[f"{layer}_{name}"])
-                    shader.uniform_sampler("material_table", self.material_table)
-                    shader.uniform_int("measure_change", int(self._measure))
-                    for index, light in enumerate(lights):
-                        visibility = uploads["visibility"].get((layer, index))
-                        atlas = self.atlases.get(index)
-                        shader.uniform_block("light", light_ubos[index])
-                        shader.uniform_int("traced_layer", int(visibility is not None))
-                        shader.uniform_sampler("shadow_map", atlas.texture if atlas is not None else no_visibility)
-                        shader.uniform_sampler("visibility", visibility if visibility is not None else no_visibility)
+                    for shader, batch, light_ubo, indices in groups:
+                        shader.bind()
+                        shader.uniform_block("camera", camera_ubo)
+                        shader.uniform_block("lights", light_ubo)
+                        for name in ("position", "normal", "albedo"):
+                            shader.uniform_sampler(f"layer_{name}", targets[f"{layer}_{name}"])
+                        shader.uniform_sampler("material_table", self.material_table)
+                        shader.uniform_int("measure_change", int(self._measure))
+                        traced = 0
+                        for slot, index in enumerate(indices):
+                            visibility = uploads["visibility"].get((layer, index))
+                            atlas = self.atlases.get(index)
+                            traced |= (visibility is not None) << slot
+                            shader.uniform_sampler(f"shadow_map{slot}",
+                                                   atlas.texture if atlas is not None else no_visibility)
+                            shader.uniform_sampler(f"visibility{slot}",
+                                                   visibility if visibility is not None else no_visibility)
+                        shader.uniform_int("traced_lights", traced)
                         batch.draw(shader)
                     gpu.state.depth_test_set("NONE")
         finally:
@@ -484,20 +505,25 @@ class GPUFrame:
         camera_ubo = self._camera_ubo(gpu, flags)
         empty = self.resources.placeholder(0.0)
 
-        def bind(shader):
+        def bind(shader, with_transparent):
             shader.uniform_block("camera", camera_ubo)
-            self._bind_layers(shader)
+            for layer in ("opaque", "transparent") if with_transparent else ("opaque",):
+                for name in ("position", "normal", "albedo", "light"):
+                    shader.uniform_sampler(f"{layer}_{name}", targets[f"{layer}_{name}"])
+                shader.uniform_sampler(f"{layer}_reflection", uploads["reflection"].get(layer, empty))
+            if with_transparent:
+                shader.uniform_sampler("refraction", uploads["refraction"] or empty)
             shader.uniform_sampler("material_table", self.material_table)
-            shader.uniform_sampler("opaque_light", targets["opaque_light"])
-            shader.uniform_sampler("transparent_light", targets["transparent_light"])
-            shader.uniform_sampler("opaque_reflection", uploads["reflection"].get("opaque", empty))
-            shader.uniform_sampler("transparent_reflection", uploads["reflection"].get("transparent", empty))
-            shader.uniform_sampler("refraction", uploads["refraction"] or empty)
             shader.uniform_sampler("shadow_change", targets["shadow_change"] if self._measure else empty)
             shader.uniform_int("measure_change", int(self._measure))
 
         gpu.state.blend_set("NONE")
-        self._fullscreen(gpu, "composite", framebuffer, bind)
+        # The opaque layer over the whole frame, then both layers where the transparent one
+        # covers the pixel (the pixels its mask lets through are drawn again, in full).
+        self._fullscreen(gpu, "composite_opaque", framebuffer, lambda shader: bind(shader, False))
+        if self._transparent_drawn:
+            masked = gpu.types.GPUFrameBuffer(color_slots=slots, depth_slot=targets["transparent_mask"])
+            self._fullscreen(gpu, "composite", masked, lambda shader: bind(shader, True), depth_test="GREATER")
         return self._read(gpu, framebuffer, 0, "FLOAT", 4) if self.read_combined else None
 
     # -- read-back ------------------------------------------------------------------

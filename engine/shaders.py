@@ -28,6 +28,9 @@ from ..phrt_addon import rules
 MATERIAL_TABLE_WIDTH = 1024
 # Cube-map shadow atlases hold the six faces in a 3 x 2 grid of tiles.
 ATLAS_COLUMNS = 3
+# Lights added by one lighting pass (each brings a shadow map and a traced-visibility sampler:
+# 3 G-buffer + 1 material + 2 x 4 = 12 of the 16 samplers every GL implementation has).
+LIGHTS_PER_PASS = 4
 LIGHT_KIND_CODES = {"SUN": 0, "POINT": 1, "SPOT": 2, "AREA": 3}
 
 GBUFFER_VERT = """
@@ -196,24 +199,24 @@ int cube_face(vec3 p) {
 
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
    on linear light-space depth, one gather).  Cube maps: the face is chosen from the offset point. */
-float shadow_lit(vec3 position, vec3 normal) {
-  int faces = int(light.shadow_offset.w + 0.5);
+float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
+  int faces = int(lights.light[i].shadow_offset.w + 0.5);
   if (faces == 0) { return 1.0; }
-  vec3 rel = position + light.shadow_offset.xyz;
+  vec3 rel = position + lights.light[i].shadow_offset.xyz;
   int face = faces == 6 ? cube_face(rel) : 0;
-  float texel_angle = light.shadow_params.x;
-  float near = light.shadow_params.y;
-  bool ortho = light.shadow_params.z > 0.5;
-  int size = int(light.shadow_params.w + 0.5);
-  float axis_depth = -dot(rel, light.face_axis[face].xyz);
+  float texel_angle = lights.light[i].shadow_params.x;
+  float near = lights.light[i].shadow_params.y;
+  bool ortho = lights.light[i].shadow_params.z > 0.5;
+  int size = int(lights.light[i].shadow_params.w + 0.5);
+  float axis_depth = -dot(rel, lights.light[i].face_axis[face].xyz);
   float texel = ortho ? texel_angle : texel_angle * max(axis_depth, near);
   vec3 p = rel + normal * (NORMAL_OFFSET_TEXELS * texel);
   if (faces == 6) { face = cube_face(p); }
-  vec4 clip = light.face_view_proj[face] * vec4(p, 1.0);
+  vec4 clip = lights.light[i].face_view_proj[face] * vec4(p, 1.0);
   if (!(clip.w > 1e-12)) { return 1.0; }
   vec3 ndc = clip.xyz / clip.w;
   if (abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z > 1.0) { return 1.0; }
-  float threshold = -dot(p, light.face_axis[face].xyz) - DEPTH_BIAS_TEXELS * texel;
+  float threshold = -dot(p, lights.light[i].face_axis[face].xyz) - DEPTH_BIAS_TEXELS * texel;
   vec2 uv = (ndc.xy * 0.5 + 0.5) * float(size) - 0.5;
   vec2 origin = floor(uv);
   vec2 f = uv - origin;
@@ -230,58 +233,59 @@ float shadow_lit(vec3 position, vec3 normal) {
 }
 
 /* shading.light_incidence: direction to the light and irradiance before shadows and cosine. */
-vec3 incidence(vec3 position, out vec3 direction) {
-  int kind = int(light.color_kind.w + 0.5);
-  vec3 color = light.color_kind.rgb;
+vec3 incidence(int i, vec3 position, out vec3 direction) {
+  int kind = int(lights.light[i].color_kind.w + 0.5);
+  vec3 color = lights.light[i].color_kind.rgb;
   if (kind == 0) {
-    direction = -light.direction.xyz;
+    direction = -lights.light[i].direction.xyz;
     return color;
   }
-  vec3 to_light = light.position_radius.xyz - position;
+  vec3 to_light = lights.light[i].position_radius.xyz - position;
   float dist = length(to_light);
   direction = to_light / max(dist, 1e-6);
   float intensity;
   if (kind == 3) {
-    intensity = clamp(-dot(direction, light.direction.xyz), 0.0, 1.0) * PHRT_INV_PI;
+    intensity = clamp(-dot(direction, lights.light[i].direction.xyz), 0.0, 1.0) * PHRT_INV_PI;
   }
   else {
     intensity = 0.25 * PHRT_INV_PI;
     if (kind == 2) {
-      float cos_angle = -dot(direction, light.direction.xyz);
-      float spot = clamp((cos_angle - light.spot.x) / max(light.spot.y - light.spot.x, 1e-6), 0.0, 1.0);
+      float cos_angle = -dot(direction, lights.light[i].direction.xyz);
+      float spot = clamp((cos_angle - lights.light[i].spot.x) / max(lights.light[i].spot.y - lights.light[i].spot.x, 1e-6), 0.0, 1.0);
       intensity *= spot * spot * (3.0 - 2.0 * spot);
     }
   }
-  float radius = light.position_radius.w;
+  float radius = lights.light[i].position_radius.w;
   return color * (intensity / (dist * dist + radius * radius));
 }
 
 /* One light at one layer's surface; with ``measure_change`` where the tracer replaced the
    shadow map, ``change`` gains the luminance of what that changed (the error-aware relevance). */
-vec3 light_layer(Surface s, float traced_visibility, inout float change) {
+vec3 light_layer(int i, sampler2D shadow_map, Surface s, float traced_visibility, inout float change) {
   if (!s.covered) { return vec3(0.0); }
   vec3 direction;
-  vec3 irradiance = incidence(s.position, direction);
+  vec3 irradiance = incidence(i, s.position, direction);
   vec3 response = brdf_cosine(s, direction);
   if (response == vec3(0.0)) { return vec3(0.0); }
   vec3 unshadowed = response * irradiance;
   float visibility = 1.0;
-  if (light.spot.z > 0.5) {
+  if (lights.light[i].spot.z > 0.5) {
     if (traced_visibility >= 0.0) {
       visibility = traced_visibility;
       if (measure_change != 0) {
-        float mapped = shadow_lit(s.position, s.normal);
+        float mapped = shadow_lit(i, shadow_map, s.position, s.normal);
         change += min(dot(abs(unshadowed * (traced_visibility - mapped)), PHRT_LUMINANCE), 1.0);
       }
     }
     else {
-      visibility = shadow_lit(s.position, s.normal);
+      visibility = shadow_lit(i, shadow_map, s.position, s.normal);
     }
   }
   return unshadowed * visibility;
 }
 
-/* One layer per pass: the transparent layer's passes are drawn only where it covers the pixel
+/* One layer and up to LIGHTS_PER_PASS lights per pass (a variant per count: llvmpipe runs
+   every branch for every pixel, so a light slot that is not used must not be compiled).  The transparent layer's passes are drawn only where it covers the pixel
    (depth-tested against the mask the resolve pass writes), so a frame pays for glass only
    where there is glass. */
 void main() {
@@ -291,8 +295,10 @@ void main() {
   vec4 position = texelFetch(layer_position, pixel, 0);
   if (position.w > 0.5) {
     Surface s = read_surface(position, texelFetch(layer_normal, pixel, 0), texelFetch(layer_albedo, pixel, 0));
-    /* traced_layer: the tracer's lit fractions for this light and layer were uploaded. */
-    out_light.rgb = light_layer(s, traced_layer != 0 ? texelFetch(visibility, pixel, 0).r : -1.0, change);
+    vec3 total = vec3(0.0);
+    /* traced_lights, bit i: the tracer's lit fractions of light i on this layer were uploaded. */
+PHRT_ADD_LIGHTS
+    out_light.rgb = total;
   }
   out_change = vec4(0.0, change, 0.0, 0.0);
 }
@@ -332,7 +338,10 @@ vec3 shade_layer(Surface s, vec3 lights, vec4 traced_reflection, out float trans
   return color + reflect_weight * reflected;
 }
 
-/* The pixel's colour with the traced terms (``use_traced``) or the raster ones. */
+/* The pixel's colour with the traced terms (``use_traced``) or the raster ones.  The variant
+   WITH_TRANSPARENT 0 shades the opaque layer only: it is drawn over the whole frame, and the
+   full variant then only where the transparent layer covers the pixel (depth-tested against
+   its mask; llvmpipe runs a branch's code for every pixel, so the glass is compiled out). */
 vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_traced) {
   vec3 image = camera.world.rgb;
   float transmissive;
@@ -342,6 +351,7 @@ vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_
     vec4 traced = use_traced && camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : no_trace;
     image = shade_layer(opaque, texelFetch(opaque_light, pixel, 0).rgb, traced, transmissive, fresnel_t);
   }
+#if WITH_TRANSPARENT
   if (transparent.covered) {
     vec4 traced = use_traced && camera.traced.y > 0.5 ? texelFetch(transparent_reflection, pixel, 0) : no_trace;
     vec3 surface_color = shade_layer(transparent, texelFetch(transparent_light, pixel, 0).rgb, traced,
@@ -358,6 +368,7 @@ vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_
     float alpha = transparent.alpha_blend;
     image = alpha * (surface_color + transmitted) + (1.0 - alpha) * behind;
   }
+#endif
   return finite_radiance(image);
 }
 
@@ -365,9 +376,11 @@ void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
   Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),
                                 texelFetch(opaque_albedo, pixel, 0));
-  Surface transparent = read_surface(texelFetch(transparent_position, pixel, 0),
-                                     texelFetch(transparent_normal, pixel, 0),
-                                     texelFetch(transparent_albedo, pixel, 0));
+  Surface transparent;
+#if WITH_TRANSPARENT
+  transparent = read_surface(texelFetch(transparent_position, pixel, 0), texelFetch(transparent_normal, pixel, 0),
+                             texelFetch(transparent_albedo, pixel, 0));
+#endif
   vec3 image = composite_pixel(pixel, opaque, transparent, true);
   out_combined = vec4(image, 1.0);
   out_change = vec4(0.0);
@@ -401,6 +414,9 @@ struct LightData {
   vec4 shadow_offset;      /* camera position - view origin, number of views (0: no map) */
   vec4 shadow_params;      /* texel angle, near, orthographic, view size in texels */
 };
+struct LightSet {
+  LightData light[LIGHTS_PER_PASS];
+};
 """
 
 
@@ -411,9 +427,9 @@ def _defines(info, normal_offset_texels, depth_bias_texels):
     info.define("DEPTH_BIAS_TEXELS", repr(float(depth_bias_texels)))
 
 
-def _layer_samplers(info, first_slot, with_albedo=True, with_element=False):
+def _layer_samplers(info, first_slot, with_albedo=True, with_element=False, layers=("opaque", "transparent")):
     slot = first_slot
-    for layer in ("opaque", "transparent"):
+    for layer in layers:
         info.sampler(slot, "FLOAT_2D", f"{layer}_position")
         info.sampler(slot + 1, "FLOAT_2D", f"{layer}_normal")
         slot += 2
@@ -468,7 +484,7 @@ def build_shadow(gpu):
 
 
 def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, uniform_blocks=(("CameraData", "camera"),),
-                     layers=None, defines=None, measure_change=False, depth_write=None):
+                     layers=None, defines=None, measure_change=False, depth_write=None, extra_defines=None):
     """A shader drawn over the whole frame (``FULLSCREEN_VERT``) that reads the G-buffer layers:
     ``layers`` are ``_layer_samplers`` keywords, ``samplers`` the FLOAT_2D samplers after them,
     ``outputs`` (type, name) per colour target, ``defines`` (normal offset, depth bias) for
@@ -482,6 +498,8 @@ def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, unifo
         info.sampler(slot + offset, "FLOAT_2D", name)
     if defines is not None:
         _defines(info, *defines)
+    for name, value in (extra_defines or {}).items():
+        info.define(name, value)
     if measure_change:
         info.push_constant("INT", "measure_change")
     if depth_write is not None:
@@ -494,23 +512,29 @@ def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, unifo
     return gpu.shader.create_from_info(info)
 
 
-def build_lighting(gpu, normal_offset_texels, depth_bias_texels):
-    """One light over one G-buffer layer (bound as ``layer_*``), added to its light target."""
+def build_lighting(gpu, normal_offset_texels, depth_bias_texels, light_count=LIGHTS_PER_PASS):
+    """``light_count`` lights over one G-buffer layer (bound as ``layer_*``), added to its light
+    target."""
     info = gpu.types.GPUShaderCreateInfo()
+    info.define("LIGHTS_PER_PASS", str(LIGHTS_PER_PASS))
     info.typedef_source(CAMERA_STRUCT + LIGHT_STRUCT)
     info.uniform_buf(0, "CameraData", "camera")
-    info.uniform_buf(1, "LightData", "light")
-    for slot, name in enumerate(("layer_position", "layer_normal", "layer_albedo", "material_table", "shadow_map",
-                                 "visibility")):
+    info.uniform_buf(1, "LightSet", "lights")
+    names = ["layer_position", "layer_normal", "layer_albedo", "material_table"]
+    for i in range(light_count):
+        names += [f"shadow_map{i}", f"visibility{i}"]
+    for slot, name in enumerate(names):
         info.sampler(slot, "FLOAT_2D", name)
     _defines(info, normal_offset_texels, depth_bias_texels)
     info.push_constant("INT", "measure_change")
-    info.push_constant("INT", "traced_layer")
+    info.push_constant("INT", "traced_lights")
     info.vertex_in(0, "VEC2", "pos")
     info.fragment_out(0, "VEC4", "out_light")
     info.fragment_out(1, "VEC4", "out_change")
     info.vertex_source(FULLSCREEN_VERT)
-    info.fragment_source(COMMON_LIB + LIGHTING_FRAG)
+    info.fragment_source(COMMON_LIB + LIGHTING_FRAG.replace("PHRT_ADD_LIGHTS\n", "".join(
+        f"    total += light_layer({i}, shadow_map{i}, s, (traced_lights & {1 << i}) != 0 "
+        f"? texelFetch(visibility{i}, pixel, 0).r : -1.0, change);\n" for i in range(light_count))))
     return gpu.shader.create_from_info(info)
 
 
@@ -519,10 +543,15 @@ def build_resolve(gpu):
                             RESOLVE_FRAG, layers={"with_albedo": False, "with_element": True}, depth_write="ANY")
 
 
-def build_composite(gpu, normal_offset_texels, depth_bias_texels):
+def build_composite(gpu, normal_offset_texels, depth_bias_texels, with_transparent=True):
+    """Emission, ambient, reflections and transparency over the accumulated lights; without
+    ``with_transparent``, the opaque layer only (see COMPOSITE_FRAG)."""
+    samplers = ["material_table", "opaque_light", "opaque_reflection", "shadow_change"]
+    if with_transparent:
+        samplers += ["transparent_light", "transparent_reflection", "refraction"]
     return _fullscreen_pass(
-        gpu, CAMERA_STRUCT,
-        ("material_table", "opaque_light", "transparent_light", "opaque_reflection", "transparent_reflection",
-         "refraction", "shadow_change"),
-        (("VEC4", "out_combined"), ("VEC4", "out_change")),
-        COMMON_LIB + COMPOSITE_FRAG, defines=(normal_offset_texels, depth_bias_texels), measure_change=True)
+        gpu, CAMERA_STRUCT, samplers, (("VEC4", "out_combined"), ("VEC4", "out_change")),
+        COMMON_LIB + COMPOSITE_FRAG, defines=(normal_offset_texels, depth_bias_texels), measure_change=True,
+        layers={"layers": ("opaque", "transparent") if with_transparent else ("opaque",)},
+        extra_defines={"WITH_TRANSPARENT": "1" if with_transparent else "0"})
+

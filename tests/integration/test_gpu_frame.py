@@ -38,11 +38,13 @@ pytestmark = pytest.mark.usefixtures("fresh_caches")
 
 
 def lit_scene():
-    """Every light kind (sun, point cube map, spot, area), metal, glass and an alpha card."""
+    """Every light kind (sun, point cube map, spot, area; five lights), metal, glass and an alpha card."""
     scene = showcase.build_showcase(WIDTH, HEIGHT)
     showcase.add_light("SPOT", (-2.0, -1.0, 3.0), 400.0, rotation=(math.radians(30), 0.0, math.radians(-60)),
                        name="Spot", spot_size=math.radians(60), spot_blend=0.3)
     showcase.add_light("AREA", (0.0, 2.0, 3.0), 200.0, rotation=(math.radians(-20), 0.0, 0.0), name="Panel")
+    # A fifth light: the lighting passes add four lights each, so this one is drawn by a second pass.
+    showcase.add_light("POINT", (1.5, -2.0, 1.5), 150.0, color=(1.0, 0.6, 0.3), name="Bulb")
     card = showcase.principled("Card", color=(0.2, 0.7, 0.3), alpha=0.5)
     showcase.mesh_object("Card", showcase.plane(1.0), card, location=(-0.8, -0.6, 0.6),
                          rotation=(math.radians(90), 0.0, 0.3))
@@ -97,6 +99,7 @@ def test_traced_visibility_reflection_and_refraction_reach_the_image_as_in_the_r
         chosen = rng.choice(opaque, size=len(opaque) // 3, replace=False)
         traced.shadow_visibility[("opaque", 0)] = (chosen, rng.integers(0, 2, len(chosen)).astype(np.float32))
         traced.shadow_visibility[("opaque", 3)] = (chosen[:100], np.zeros(100, np.float32))
+        traced.shadow_visibility[("opaque", 4)] = (chosen[100:400], np.zeros(300, np.float32))  # second pass
         traced.reflection["opaque"] = (chosen[:500], np.tile([[2.0, 0.1, 0.1]], (500, 1)))
         transparent = np.flatnonzero(gbuffer.transparent.covered.ravel())
         traced.refraction = (transparent, np.tile([[0.0, 0.0, 3.0]], (len(transparent), 1)))
