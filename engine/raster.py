@@ -61,15 +61,27 @@ def _ubo(gpu, values):
     return gpu.types.GPUUniformBuf(gpu.types.Buffer("FLOAT", values.size, values))
 
 
-def shadow_key(light, snapshot, size) -> str:
-    """Identifies a light's shadow maps: the light's own parameters, which materials cast
-    shadows (rules.casts_shadow) and every mesh's content and placement (what the maps see)."""
+def shadow_scene_key(snapshot) -> bytes:
+    """What every shadow map of a frame sees: which materials cast shadows (rules.casts_shadow)
+    and every mesh's content and placement (computed once per frame, not per light)."""
     digest = hashlib.blake2b(digest_size=16)
-    digest.update(repr((light.kind, tuple(light.position), tuple(light.direction), light.spot_size, size)).encode())
-    digest.update(bytes(rules.casts_shadow(material) for material in snapshot.materials))
+    materials = snapshot.materials
+    if materials:
+        casts = rules.casts_shadow_values(np.array([m.transmission for m in materials], np.float64),
+                                          np.array([m.metallic for m in materials], np.float64),
+                                          np.array([m.alpha for m in materials], np.float64))
+        digest.update(np.asarray(casts, np.uint8).tobytes())
     for mesh in snapshot.meshes:
         digest.update(mesh.geometry_key.encode())
         digest.update(np.asarray(mesh.matrix_world, np.float64).tobytes())
+    return digest.digest()
+
+
+def shadow_key(light, scene_key: bytes, size) -> str:
+    """Identifies a light's shadow maps: the light's own parameters and what the maps see
+    (``shadow_scene_key``)."""
+    digest = hashlib.blake2b(scene_key, digest_size=16)
+    digest.update(repr((light.kind, tuple(light.position), tuple(light.direction), light.spot_size, size)).encode())
     return digest.hexdigest()
 
 
@@ -301,12 +313,15 @@ class GPUFrame:
         start = time.perf_counter()
         drawn = False
         bounds = None
+        scene_key = None
         keys = set()
         size = int(snapshot.settings.shadow_map_size)
         for index, light in enumerate(snapshot.lights):
             if not light.cast_shadows:
                 continue
-            key = shadow_key(light, snapshot, size)
+            if scene_key is None:
+                scene_key = shadow_scene_key(snapshot)
+            key = shadow_key(light, scene_key, size)
             keys.add(key)
             atlas = self.resources.shadow_atlas(key)
             if atlas is None:
