@@ -34,12 +34,14 @@ def instance_element_name(instance) -> str:
 
 def _read_mesh(mesh):
     """(positions (V,3) f32, triangles (T,3) i32, corner normals (3T,3) f32, corner uvs or None,
-    triangle material slot (T,) i32) of a Blender mesh, cached by content."""
+    triangle material slot (T,) i32, content key of positions and triangles) of a Blender mesh,
+    cached by content."""
     n_vertices = len(mesh.vertices)
     positions = np.empty(n_vertices * 3, np.float32)
     mesh.vertices.foreach_get("co", positions)
     positions = positions.reshape(-1, 3)
-    key = (mesh.name, n_vertices, len(mesh.polygons), len(mesh.loops), geometry_key(positions))
+    positions_key = geometry_key(positions)
+    key = (mesh.name, n_vertices, len(mesh.polygons), len(mesh.loops), positions_key)
     cached = session.current().meshes.get(key)
     if cached is not None:
         return cached
@@ -59,7 +61,9 @@ def _read_mesh(mesh):
         uv_all = np.empty(len(mesh.loops) * 2, np.float32)
         mesh.uv_layers.active.uv.foreach_get("vector", uv_all)
         corner_uvs = rules.texture_coordinates(uv_all.reshape(-1, 2)[loops], len(loops))
-    value = (positions, triangles.reshape(-1, 3), np.ascontiguousarray(corner_normals), corner_uvs, slots)
+    triangles = triangles.reshape(-1, 3)
+    content_key = positions_key + geometry_key(triangles)
+    value = (positions, triangles, np.ascontiguousarray(corner_normals), corner_uvs, slots, content_key)
     session.current().meshes.put(key, value)
     return value
 
@@ -251,7 +255,7 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
             try:
                 if mesh is None or len(mesh.polygons) == 0:
                     continue
-                positions, triangles, corner_normals, corner_uvs, slots = _read_mesh(mesh)
+                positions, triangles, corner_normals, corner_uvs, slots, content_key = _read_mesh(mesh)
                 slot_materials = [slot.material for slot in obj.material_slots] or [None]
                 slot_to_material = np.array([material_slot_index(m) for m in slot_materials], np.int32)
                 slots = np.clip(slots, 0, len(slot_to_material) - 1)
@@ -277,7 +281,10 @@ def extract(depsgraph, camera_override=None, settings_override=None) -> SceneSna
                     name=name, matrix_world=matrix, positions=positions, triangles=triangles,
                     corner_normals=corner_normals, corner_uvs=corner_uvs,
                     tri_material=tri_material, tri_element=tri_element,
-                    geometry_key=geometry_key(positions, triangles, tri_material, tri_element)))
+                    # The content was hashed once when the mesh was read: only the per-object
+                    # material and element assignment is hashed per frame.
+                    geometry_key=geometry_key(np.frombuffer(content_key.encode(), np.uint8), tri_material,
+                                              tri_element)))
             finally:
                 if owned_mesh:
                     obj.to_mesh_clear()

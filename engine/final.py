@@ -120,7 +120,9 @@ class FinalRender:
                 render_pass = layer.passes.find_by_name(name, "")
                 if render_pass is None or array is None:
                     continue
-                flat = np.ascontiguousarray(np.nan_to_num(array), dtype=np.float32).ravel()
+                flat = np.ascontiguousarray(array, dtype=np.float32).ravel()
+                if not np.isfinite(flat).all():  # the passes are built finite: this is the last guard
+                    flat = np.nan_to_num(flat)
                 expected = width * height * render_pass.channels
                 if flat.size != expected:
                     raise RuntimeError(f"pass {name}: {flat.size} values for {expected}")

@@ -226,11 +226,16 @@ class CostModel:
     def non_trace_ms(self) -> float:
         return float(sum(self.stage_ms().values()))
 
-    def time_left(self, budget_ms: float) -> float:
-        """T: the frame budget minus the predicted raster, selection and composite
-        time of this frame, never negative (finite for any finite budget)."""
+    def time_left(self, budget_ms: float, raster_ms: float | None = None) -> float:
+        """T: the frame budget minus the raster, selection and composite time of this frame,
+        never negative (finite for any finite budget).  ``raster_ms``: what this frame's raster
+        half already took (measured: the selection runs after it), else the predicted one."""
         budget = float(np.nan_to_num(budget_ms, nan=0.0, posinf=MAX_PREDICTED_MS, neginf=0.0))
-        return float(min(max(budget - self.non_trace_ms(), 0.0), MAX_PREDICTED_MS))
+        stages = self.stage_ms()
+        if raster_ms is not None:
+            stages["raster"] = float(np.clip(np.nan_to_num(raster_ms, nan=stages["raster"], posinf=MAX_PREDICTED_MS),
+                                             0.0, MAX_PREDICTED_MS))
+        return float(min(max(budget - sum(stages.values()), 0.0), MAX_PREDICTED_MS))
 
     def ms_per_ray(self) -> dict[str, float]:
         return {effect: estimate.value for effect, estimate in self._ms_per_ray.items()}

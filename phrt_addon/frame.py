@@ -141,7 +141,9 @@ class FrameRenderer:
                                         max_area_fraction=settings.max_area_fraction, mode=mode,
                                         cost_mode=settings.cost_mode, relevance=settings.relevance,
                                         order=settings.selection_order, budget_at=settings.budget_at),
-            self.cost_model, frame=snapshot.frame)
+            self.cost_model, frame=snapshot.frame,
+            # The time left is measured after this frame's raster half, not predicted for it.
+            raster_ms=max(raster_ms - raster.setup_ms, 0.0))
         if self.forced_selection is not None:
             selection = heuristic.force_selection(selection, self.forced_selection)
         selected = np.asarray(selection.selected, bool)
@@ -214,22 +216,23 @@ class FrameRenderer:
     def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
         front = np.asarray(raster.front_element)
         n = len(snapshot.elements)
-        # Ids beyond the element list (a corrupt read-back) are no element.
-        front = np.where((front >= 0) & (front < n), front, -1)
-        candidate_flags = np.r_[candidate, False]
-        selected_flags = np.r_[np.asarray(selected, bool), False]
-        depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, 1e10).astype(np.float32)
+        # Ids beyond the element list (a corrupt read-back) are no element (index n: the 0 flag).
+        index = np.where((front >= 0) & (front < n), front, n)
+        candidate_flags = np.r_[candidate, False].astype(np.float32)
+        selected_flags = np.r_[np.asarray(selected, bool), False].astype(np.float32)
+        depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, np.float32(1e10)).astype(np.float32,
+                                                                                                    copy=False)
         if combined is not None:  # None: the image stayed on the GPU (the viewport draws it there)
-            combined = np.ascontiguousarray(combined, dtype=np.float32)
-            combined[..., :3] = shading.finite(combined[..., :3])
-            combined[..., 3] = 1.0
+            combined = shading.finite_rgba(combined)
+        element = index.astype(np.float32) + np.float32(1.0)
+        element[index == n] = 0.0
         return FramePasses(
             combined=combined,
             depth=depth,
-            normal=np.nan_to_num(raster.front_normal).astype(np.float32),
-            selected=selected_flags[front].astype(np.float32),
-            candidate=candidate_flags[front].astype(np.float32),
-            element=(front + 1).astype(np.float32),
+            normal=np.nan_to_num(np.asarray(raster.front_normal, np.float32)),
+            selected=selected_flags[index],
+            candidate=candidate_flags[index],
+            element=element,
         )
 
     def _shadow_footprints(self, raster, snapshot, element_bounds, area_px):

@@ -131,20 +131,24 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     A, measured rather than estimated from bounds."""
     height, width = element_image.shape
     flat = element_image.ravel()
-    mask = flat >= 0
-    ids = flat[mask]
-    counts = np.bincount(ids, minlength=n_elements)[:n_elements].astype(np.int64)
-    ys, xs = np.divmod(np.flatnonzero(mask), width)
-    ndc_x = (xs + 0.5) / width * 2.0 - 1.0
-    ndc_y = (ys + 0.5) / height * 2.0 - 1.0
+    # Every pixel counted in one pass: no element (or an id beyond the list) goes to bin n.
+    ids = np.where((flat >= 0) & (flat < n_elements), flat, n_elements)
+    size = n_elements + 1
+    counts = np.bincount(ids, minlength=size)[:n_elements].astype(np.int64)
     safe = np.maximum(counts, 1)
+    has_pixels = counts > 0
+    # Mean pixel column and row, then to NDC (affine: the mean of the NDC is the NDC of the mean).
+    columns = np.tile(np.arange(width, dtype=np.float64), height)
+    rows = np.repeat(np.arange(height, dtype=np.float64), width)
+    mean_x = np.bincount(ids, weights=columns, minlength=size)[:n_elements] / safe
+    mean_y = np.bincount(ids, weights=rows, minlength=size)[:n_elements] / safe
     centre = np.zeros((n_elements, 2))
-    centre[:, 0] = np.bincount(ids, weights=ndc_x, minlength=n_elements)[:n_elements] / safe
-    centre[:, 1] = np.bincount(ids, weights=ndc_y, minlength=n_elements)[:n_elements] / safe
+    centre[has_pixels, 0] = ((mean_x + 0.5) / width * 2.0 - 1.0)[has_pixels]
+    centre[has_pixels, 1] = ((mean_y + 0.5) / height * 2.0 - 1.0)[has_pixels]
     # Mean depth (bincount) rather than the median: O(n) and stable for convex-ish elements.
-    depth_values = view_depth.ravel()[mask].astype(np.float64)
+    depth_values = np.asarray(view_depth, dtype=np.float64).ravel()
     finite = np.isfinite(depth_values)
-    depth_sum = np.bincount(ids[finite], weights=depth_values[finite], minlength=n_elements)[:n_elements]
-    depth_count = np.bincount(ids[finite], minlength=n_elements)[:n_elements]
+    depth_sum = np.bincount(ids, weights=np.where(finite, depth_values, 0.0), minlength=size)[:n_elements]
+    depth_count = np.bincount(ids, weights=finite, minlength=size)[:n_elements]
     depth = np.where(depth_count > 0, depth_sum / np.maximum(depth_count, 1), np.inf)
     return counts, centre, depth

@@ -272,13 +272,15 @@ class SelectionResult:
 
 def select(elements: FrameElements, previous_selection=None, settings: SelectionSettings | None = None,
            model: CostModel | None = None, *, time_left_ms: float | None = None,
-           element_ms: np.ndarray | None = None, frame: int | None = None) -> SelectionResult:
+           element_ms: np.ndarray | None = None, frame: int | None = None,
+           raster_ms: float | None = None) -> SelectionResult:
     """Choose this frame's ray traced elements (sections V.B-V.D).
 
     ``previous_selection``: last frame's selection (see previously_selected_mask).
     ``model``: the cost model giving T and each element's predicted ms; a cold
     :class:`CostModel` when None.  ``time_left_ms`` and ``element_ms`` override
-    the model's T and predicted ms (tests, replays).
+    the model's T and predicted ms (tests, replays).  ``raster_ms``: the recurring raster time
+    this frame already spent, measured (T is the time left after it), else predicted.
     """
     settings = settings or SelectionSettings()
     model = model or CostModel()
@@ -304,7 +306,7 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
         budget_ms = float(min(model.non_trace_ms() + time_left, MAX_PREDICTED_MS))
     else:
-        time_left = model.time_left(settings.budget_ms) if time_left_ms is None else time_left_ms
+        time_left = model.time_left(settings.budget_ms, raster_ms) if time_left_ms is None else time_left_ms
         time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
 
     n = len(elements)

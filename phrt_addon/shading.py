@@ -238,3 +238,13 @@ def environment_fresnel(f0, n_dot_v, roughness):
 def finite(image, limit=1e6):
     """Clamp to finite, non-negative radiance: no NaN or Inf ever leaves a stage."""
     return np.clip(np.nan_to_num(image, nan=0.0, posinf=limit, neginf=0.0), 0.0, limit)
+
+
+def finite_rgba(image, limit=1e6) -> np.ndarray:
+    """An RGBA float32 image (a new array) with ``finite`` radiance and alpha 1."""
+    out = np.array(image, dtype=np.float32, order="C", copy=True)
+    # The common case (a GPU composite already clamps) costs two reductions, not a rewrite.
+    if not (np.isfinite(out).all() and out.min() >= 0.0 and out.max() <= limit):
+        out = np.clip(np.nan_to_num(out, nan=0.0, posinf=limit, neginf=0.0), 0.0, limit)
+    out[..., 3] = 1.0
+    return out

@@ -169,6 +169,19 @@ def test_time_left_learns_the_measured_stage_times():
     assert model.time_left(100.0) == pytest.approx(76.0)
 
 
+def test_time_left_after_a_measured_raster_half_uses_the_measurement():
+    """The selection runs after the G-buffer: the time left is what this frame's raster half
+    left, not what the model predicted it would take (a slow raster frame leaves less)."""
+    model = CostModel()
+    model.observe(FrameStats(raster_ms=20.0, select_ms=0.5, composite_ms=3.5))
+    assert model.time_left(100.0, raster_ms=50.0) == pytest.approx(46.0)
+    assert model.time_left(100.0, raster_ms=0.0) == pytest.approx(96.0)
+    assert model.time_left(100.0, raster_ms=200.0) == 0.0
+    # A measurement that is not a number falls back on the prediction; +inf leaves nothing.
+    assert model.time_left(100.0, raster_ms=float("nan")) == pytest.approx(76.0)
+    assert model.time_left(100.0, raster_ms=float("inf")) == 0.0
+
+
 @pytest.mark.parametrize("budget", [0.0, 10.0, -5.0, float("nan")])
 def test_time_left_is_never_negative(budget):
     assert CostModel().time_left(budget) == 0.0
