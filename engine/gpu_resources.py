@@ -62,6 +62,7 @@ class GPUResources:
         self.freed = Counter()
         self.uploads = 0  # scene data sent to the GPU (meshes, textures, material tables)
         self.frames_drawn = 0  # G-buffers drawn into the targets (the viewport checks its image is current)
+        self._states_drawn = set()  # pipeline states drawn once with the current shaders (first_use)
 
     # -- bookkeeping -------------------------------------------------------
     def counts(self) -> dict:
@@ -79,6 +80,7 @@ class GPUResources:
         if not keep_shaders:
             self.freed["shader"] += len(self._shaders)
             self._shaders.clear()
+            self._states_drawn.clear()
             self.freed["constant"] += len(self._constants)
             self._constants.clear()
         self.freed["mesh"] += len(self._meshes)
@@ -96,6 +98,14 @@ class GPUResources:
     def empty(self) -> bool:
         return not (self._shaders or self._meshes or self._textures or self._shadows or self._targets
                     or self._constants or self._material_table[1] is not None)
+
+    def first_use(self, kind: str, state) -> bool:
+        """True the first time ``state`` (hashable) of ``kind`` is drawn with these shaders."""
+        key = (kind, state)
+        if key in self._states_drawn:
+            return False
+        self._states_drawn.add(key)
+        return True
 
     # -- shaders -------------------------------------------------------------
     def shader(self, name: str):

@@ -190,9 +190,17 @@ class GPUFrame:
         uploads = self._upload_traced(gpu, traced)
         self.stats["traced_upload_ms"] = _ms(start)
         self._measure = bool(measure_change)
+        # A driver compiles a shader for each pipeline state on its first draw (llvmpipe JITs the
+        # fragment code then): the first frame of a configuration pays it once, as set-up.
+        per_pass = shaders.LIGHTS_PER_PASS
+        lights = len(self.snapshot.lights)
+        configuration = (tuple(min(per_pass, lights - first) for first in range(0, lights, per_pass)),
+                         self._transparent_drawn, self._measure)
+        first_use = self.resources.first_use("shade", configuration)
         self._light(gpu, uploads)
         combined = self._composite(gpu, uploads)
         self.stats["lighting_ms"] = _ms(start)
+        self.stats["shade_setup_ms"] = self.stats["lighting_ms"] - self.stats["traced_upload_ms"] if first_use else 0.0
         return combined
 
     # -- drawing -----------------------------------------------------------------

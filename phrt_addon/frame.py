@@ -170,6 +170,8 @@ class FrameRenderer:
         traced_upload_ms = float(raster.stats.get("traced_upload_ms", 0.0)) if traced is not None else 0.0
         trace_ms += traced_upload_ms
         composite_ms = max(composite_ms - traced_upload_ms, 0.0)
+        # The first draw of a lighting/composite configuration compiles its shaders (one-time).
+        shade_setup_ms = float(raster.stats.get("shade_setup_ms", 0.0))
         passes = self._passes(snapshot, raster, combined, selected, candidate)
 
         if measure:
@@ -182,10 +184,11 @@ class FrameRenderer:
             select_ms += _ms(start)
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
-        setup_ms = raster.setup_ms + counters.upload_ms
+        setup_ms = raster.setup_ms + counters.upload_ms + shade_setup_ms
         # One-time work (Embree builds, shader compiles, uploads, new shadow maps) is not a per-frame cost.
         self.cost_model.observe(FrameStats(
-            raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms, composite_ms=composite_ms,
+            raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
+            composite_ms=None if shade_setup_ms > 0 else composite_ms,
             trace_ms=max(trace_ms - counters.upload_ms, 0.0) if np.any(selected) else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},

@@ -224,3 +224,23 @@ def test_element_ids_hold_32_bits():
     front = run_on_gpu(scene, job)
     assert front[24, 32] == 40_000
     assert front[0, 0] == -1
+
+
+def test_the_first_draw_of_a_lighting_configuration_is_counted_as_set_up():
+    """llvmpipe (like any driver) compiles a pipeline state on its first draw: the frame that
+    first shades with a configuration books that time as one-time work, the next frames do not."""
+    scene = lit_scene()
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        setups = []
+        for measure in (False, False, True, True):
+            frame = raster.GPUFrame(snapshot)
+            frame.draw()
+            frame.shade(None, measure_change=measure)
+            setups.append(frame.stats["shade_setup_ms"])
+        return setups
+
+    setups = run_on_gpu(scene, job)
+    assert setups[0] > 0 and setups[1] == 0.0
+    assert setups[2] > 0 and setups[3] == 0.0  # measuring the traced change draws other targets
