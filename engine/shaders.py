@@ -166,9 +166,8 @@ float fresnel_dielectric(float cos_incident, float eta) {
 }
 
 vec3 brdf_cosine(Surface s, vec3 l) {
-  float n_dot_l = dot(s.normal, l);
-  if (!(n_dot_l > 0.0)) { return vec3(0.0); }
-  n_dot_l = min(n_dot_l, 1.0);
+  float cosine = dot(s.normal, l);
+  float n_dot_l = clamp(cosine, 0.0, 1.0);
   vec3 h = s.view + l;
   h /= max(length(h), 1e-12);
   float n_dot_h = clamp(dot(s.normal, h), 0.0, 1.0);
@@ -179,7 +178,8 @@ vec3 brdf_cosine(Surface s, vec3 l) {
   float specular = a2 / max(3.14159265358979 * denom * denom, 1e-30)
                    / max(n_dot_l * (1.0 - k) + k, 1e-30) / (s.n_dot_v * (1.0 - k) + k) * 0.25;
   vec3 f = fresnel_schlick(s.f0, v_dot_h);
-  return (s.diffuse_color * (1.0 - f) + f * specular) * n_dot_l;
+  /* Below the horizon (or not a number): no light, chosen without a branch. */
+  return cosine > 0.0 ? (s.diffuse_color * (1.0 - f) + f * specular) * n_dot_l : vec3(0.0);
 }
 
 vec3 finite_radiance(vec3 c) {
@@ -190,18 +190,20 @@ vec3 finite_radiance(vec3 c) {
 """
 
 LIGHTING_FRAG = """
+/* llvmpipe runs both sides of every branch for every pixel, with mask bookkeeping on top:
+   the per-pixel code below chooses with selects rather than branches and early returns. */
 int cube_face(vec3 p) {
   vec3 a = abs(p);
-  if (a.x >= a.y && a.x >= a.z) { return p.x < 0.0 ? 1 : 0; }
-  if (a.y >= a.z) { return p.y < 0.0 ? 3 : 2; }
-  return p.z < 0.0 ? 5 : 4;
+  bool x_major = a.x >= a.y && a.x >= a.z;
+  bool y_major = !x_major && a.y >= a.z;
+  float along = x_major ? p.x : (y_major ? p.y : p.z);
+  return (x_major ? 0 : (y_major ? 2 : 4)) + (along < 0.0 ? 1 : 0);
 }
 
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
    on linear light-space depth, one gather).  Cube maps: the face is chosen from the offset point. */
 float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
   int faces = int(lights.light[i].shadow_offset.w + 0.5);
-  if (faces == 0) { return 1.0; }
   vec3 rel = position + lights.light[i].shadow_offset.xyz;
   int face = faces == 6 ? cube_face(rel) : 0;
   float texel_angle = lights.light[i].shadow_params.x;
@@ -211,11 +213,12 @@ float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
   float axis_depth = -dot(rel, lights.light[i].face_axis[face].xyz);
   float texel = ortho ? texel_angle : texel_angle * max(axis_depth, near);
   vec3 p = rel + normal * (NORMAL_OFFSET_TEXELS * texel);
-  if (faces == 6) { face = cube_face(p); }
+  face = faces == 6 ? cube_face(p) : face;
   vec4 clip = lights.light[i].face_view_proj[face] * vec4(p, 1.0);
-  if (!(clip.w > 1e-12)) { return 1.0; }
-  vec3 ndc = clip.xyz / clip.w;
-  if (abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z > 1.0) { return 1.0; }
+  bool in_front = clip.w > 1e-12;
+  vec3 ndc = clip.xyz / (in_front ? clip.w : 1.0);
+  /* No map, behind the view or outside it: lit. */
+  bool inside = faces != 0 && in_front && !(abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z > 1.0);
   float threshold = -dot(p, lights.light[i].face_axis[face].xyz) - DEPTH_BIAS_TEXELS * texel;
   vec2 uv = (ndc.xy * 0.5 + 0.5) * float(size) - 0.5;
   vec2 origin = floor(uv);
@@ -229,59 +232,41 @@ float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
      x = (x0, y1), y = (x1, y1). */
   vec4 depth = textureGather(shadow_map, (tile + origin + 1.0) / vec2(textureSize(shadow_map, 0)), 0);
   vec4 lit = vec4(greaterThanEqual(depth, vec4(threshold)));
-  return mix(mix(lit.w, lit.z, f.x), mix(lit.x, lit.y, f.x), f.y);
+  return inside ? mix(mix(lit.w, lit.z, f.x), mix(lit.x, lit.y, f.x), f.y) : 1.0;
 }
 
 /* shading.light_incidence: direction to the light and irradiance before shadows and cosine. */
 vec3 incidence(int i, vec3 position, out vec3 direction) {
   int kind = int(lights.light[i].color_kind.w + 0.5);
   vec3 color = lights.light[i].color_kind.rgb;
-  if (kind == 0) {
-    direction = -lights.light[i].direction.xyz;
-    return color;
-  }
+  vec3 axis = lights.light[i].direction.xyz;
   vec3 to_light = lights.light[i].position_radius.xyz - position;
   float dist = length(to_light);
-  direction = to_light / max(dist, 1e-6);
-  float intensity;
-  if (kind == 3) {
-    intensity = clamp(-dot(direction, lights.light[i].direction.xyz), 0.0, 1.0) * PHRT_INV_PI;
-  }
-  else {
-    intensity = 0.25 * PHRT_INV_PI;
-    if (kind == 2) {
-      float cos_angle = -dot(direction, lights.light[i].direction.xyz);
-      float spot = clamp((cos_angle - lights.light[i].spot.x) / max(lights.light[i].spot.y - lights.light[i].spot.x, 1e-6), 0.0, 1.0);
-      intensity *= spot * spot * (3.0 - 2.0 * spot);
-    }
-  }
+  vec3 towards = to_light / max(dist, 1e-6);
+  float cos_angle = -dot(towards, axis);
+  /* area: cosine-weighted panel; point: isotropic; spot: isotropic with the cone's smoothstep */
+  float spot = clamp((cos_angle - lights.light[i].spot.x) / max(lights.light[i].spot.y - lights.light[i].spot.x, 1e-6),
+                     0.0, 1.0);
+  float intensity = kind == 3 ? clamp(cos_angle, 0.0, 1.0) * PHRT_INV_PI
+                              : 0.25 * PHRT_INV_PI * (kind == 2 ? spot * spot * (3.0 - 2.0 * spot) : 1.0);
   float radius = lights.light[i].position_radius.w;
-  return color * (intensity / (dist * dist + radius * radius));
+  bool sun = kind == 0;
+  direction = sun ? -axis : towards;
+  return sun ? color : color * (intensity / (dist * dist + radius * radius));
 }
 
 /* One light at one layer's surface; with ``measure_change`` where the tracer replaced the
    shadow map, ``change`` gains the luminance of what that changed (the error-aware relevance). */
 vec3 light_layer(int i, sampler2D shadow_map, Surface s, float traced_visibility, inout float change) {
-  if (!s.covered) { return vec3(0.0); }
   vec3 direction;
   vec3 irradiance = incidence(i, s.position, direction);
-  vec3 response = brdf_cosine(s, direction);
-  if (response == vec3(0.0)) { return vec3(0.0); }
-  vec3 unshadowed = response * irradiance;
-  float visibility = 1.0;
-  if (lights.light[i].spot.z > 0.5) {
-    if (traced_visibility >= 0.0) {
-      visibility = traced_visibility;
-      if (measure_change != 0) {
-        float mapped = shadow_lit(i, shadow_map, s.position, s.normal);
-        change += min(dot(abs(unshadowed * (traced_visibility - mapped)), PHRT_LUMINANCE), 1.0);
-      }
-    }
-    else {
-      visibility = shadow_lit(i, shadow_map, s.position, s.normal);
-    }
-  }
-  return unshadowed * visibility;
+  vec3 unshadowed = brdf_cosine(s, direction) * irradiance;
+  /* The shadow map's lit fraction (1 for a light without one), or the tracer's where it ran. */
+  float mapped = shadow_lit(i, shadow_map, s.position, s.normal);
+  bool traced = lights.light[i].spot.z > 0.5 && traced_visibility >= 0.0;
+  change += measure_change != 0 && traced
+            ? min(dot(abs(unshadowed * (traced_visibility - mapped)), PHRT_LUMINANCE), 1.0) : 0.0;
+  return unshadowed * (traced ? traced_visibility : mapped);
 }
 
 /* One layer and up to LIGHTS_PER_PASS lights per pass (a variant per count: llvmpipe runs
@@ -290,17 +275,15 @@ vec3 light_layer(int i, sampler2D shadow_map, Surface s, float traced_visibility
    where there is glass. */
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
-  out_light = vec4(0.0);
   float change = 0.0;
-  vec4 position = texelFetch(layer_position, pixel, 0);
-  if (position.w > 0.5) {
-    Surface s = read_surface(position, texelFetch(layer_normal, pixel, 0), texelFetch(layer_albedo, pixel, 0));
-    vec3 total = vec3(0.0);
-    /* traced_lights, bit i: the tracer's lit fractions of light i on this layer were uploaded. */
+  Surface s = read_surface(texelFetch(layer_position, pixel, 0), texelFetch(layer_normal, pixel, 0),
+                           texelFetch(layer_albedo, pixel, 0));
+  vec3 total = vec3(0.0);
+  /* traced_lights, bit i: the tracer's lit fractions of light i on this layer were uploaded. */
 PHRT_ADD_LIGHTS
-    out_light.rgb = total;
-  }
-  out_change = vec4(0.0, change, 0.0, 0.0);
+  /* A pixel the layer does not cover gets nothing (selected, not branched: see cube_face). */
+  out_light = vec4(s.covered ? total : vec3(0.0), 0.0);
+  out_change = vec4(0.0, s.covered ? change : 0.0, 0.0, 0.0);
 }
 """
 
@@ -533,7 +516,7 @@ def build_lighting(gpu, normal_offset_texels, depth_bias_texels, light_count=LIG
     info.fragment_out(1, "VEC4", "out_change")
     info.vertex_source(FULLSCREEN_VERT)
     info.fragment_source(COMMON_LIB + LIGHTING_FRAG.replace("PHRT_ADD_LIGHTS\n", "".join(
-        f"    total += light_layer({i}, shadow_map{i}, s, (traced_lights & {1 << i}) != 0 "
+        f"  total += light_layer({i}, shadow_map{i}, s, (traced_lights & {1 << i}) != 0 "
         f"? texelFetch(visibility{i}, pixel, 0).r : -1.0, change);\n" for i in range(light_count))))
     return gpu.shader.create_from_info(info)
 
