@@ -37,14 +37,17 @@ SCENE_KINDS = ("mesh", "texture", "material_table", "shadow_map", "target")
 pytestmark = pytest.mark.usefixtures("fresh_caches")
 
 
-def lit_scene():
-    """Every light kind (sun, point cube map, spot, area; five lights), metal, glass and an alpha card."""
+def lit_scene(extra_lights=0):
+    """Every light kind (sun, point cube map, spot, area; five lights), metal, glass and an alpha card;
+    ``extra_lights`` more point lights."""
     scene = showcase.build_showcase(WIDTH, HEIGHT)
     showcase.add_light("SPOT", (-2.0, -1.0, 3.0), 400.0, rotation=(math.radians(30), 0.0, math.radians(-60)),
                        name="Spot", spot_size=math.radians(60), spot_blend=0.3)
     showcase.add_light("AREA", (0.0, 2.0, 3.0), 200.0, rotation=(math.radians(-20), 0.0, 0.0), name="Panel")
-    # A fifth light: the lighting passes add four lights each, so this one is drawn by a second pass.
     showcase.add_light("POINT", (1.5, -2.0, 1.5), 150.0, color=(1.0, 0.6, 0.3), name="Bulb")
+    for index in range(extra_lights):
+        showcase.add_light("POINT", (-1.5 + 0.7 * index, 2.2, 1.2 + 0.3 * index), 80.0, color=(0.6, 0.7, 1.0),
+                           name=f"Extra{index}")
     card = showcase.principled("Card", color=(0.2, 0.7, 0.3), alpha=0.5)
     showcase.mesh_object("Card", showcase.plane(1.0), card, location=(-0.8, -0.6, 0.6),
                          rotation=(math.radians(90), 0.0, 0.3))
@@ -82,8 +85,10 @@ def assert_parity(gpu_image, reference, gbuffer):
     assert np.median(relative[lit]) < 1e-4
 
 
-def test_glsl_lighting_matches_the_numpy_reference_on_one_gbuffer():
-    scene = lit_scene()
+@pytest.mark.parametrize("extra_lights", [0, raster.shaders.LIGHTS_PER_PASS - 4])
+def test_glsl_lighting_matches_the_numpy_reference_on_one_gbuffer(extra_lights):
+    """Five lights fit one lighting pass; with more than LIGHTS_PER_PASS, a second pass adds the rest."""
+    scene = lit_scene(extra_lights)
     gpu_image, reference, gbuffer = gpu_and_reference(scene)
     assert gbuffer.transparent.covered.any()  # the glass and the card are in view
     assert_parity(gpu_image, reference, gbuffer)
