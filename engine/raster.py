@@ -466,14 +466,18 @@ class GPUFrame:
         lights = self.snapshot.lights
         layers = ("opaque", "transparent") if self._transparent_drawn else ("opaque",)
         framebuffers = {}
-        for layer in ("opaque", "transparent"):
+        for layer in layers:
             slots = (targets[f"{layer}_light"],)
             if self._measure:
                 slots += (targets["shadow_change"],)  # without the attachment, out_change is discarded
             framebuffers[layer] = gpu.types.GPUFrameBuffer(
                 color_slots=slots, depth_slot=targets["transparent_mask"] if layer == "transparent" else None)
-            with framebuffers[layer].bind():
-                framebuffers[layer].clear(color=(0.0, 0.0, 0.0, 0.0))
+            # The first pass writes every pixel the composite reads (the whole frame for the opaque
+            # layer, the masked pixels for the transparent one) and later ones add to it; a target
+            # is cleared only when nothing writes it or when it sums both layers (the change).
+            if self._measure or not lights:
+                with framebuffers[layer].bind():
+                    framebuffers[layer].clear(color=(0.0, 0.0, 0.0, 0.0))
         if not lights:
             return
         camera_ubo = self._camera_ubo(gpu)
@@ -488,7 +492,6 @@ class GPUFrame:
             shader = self._shaders[f"lighting{len(indices)}"]
             # Referenced until drawn: a dropped UBO reads as zeros.
             groups.append((shader, self.resources.fullscreen_batch(shader), _ubo(gpu, values.ravel()), indices))
-        gpu.state.blend_set("ADDITIVE_PREMULT")
         try:
             for layer in layers:
                 with framebuffers[layer].bind():
@@ -496,7 +499,8 @@ class GPUFrame:
                     # The full-screen triangle sits at depth 0.5: it passes where the mask is 0.
                     gpu.state.depth_test_set("GREATER" if layer == "transparent" else "NONE")
                     gpu.state.depth_mask_set(False)
-                    for shader, batch, light_ubo, indices in groups:
+                    for number, (shader, batch, light_ubo, indices) in enumerate(groups):
+                        gpu.state.blend_set("ADDITIVE_PREMULT" if number > 0 or self._measure else "NONE")
                         shader.bind()
                         shader.uniform_block("camera", camera_ubo)
                         shader.uniform_block("lights", light_ubo)
