@@ -328,31 +328,24 @@ vec3 shade_layer(Surface s, vec3 lights, vec4 traced_reflection, out float trans
    full variant then only where the transparent layer covers the pixel (depth-tested against
    its mask; llvmpipe runs a branch's code for every pixel, so the glass is compiled out). */
 vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_traced) {
-  vec3 image = camera.world.rgb;
+  /* Every term is computed and the covered ones chosen by selects (see cube_face). */
+  vec4 no_trace = vec4(0.0);
   float transmissive;
   float fresnel_t;
-  vec4 no_trace = vec4(0.0);
-  if (opaque.covered) {
-    vec4 traced = use_traced && camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : no_trace;
-    image = shade_layer(opaque, texelFetch(opaque_light, pixel, 0).rgb, traced, transmissive, fresnel_t);
-  }
+  vec4 traced = use_traced && camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : no_trace;
+  vec3 opaque_color = shade_layer(opaque, texelFetch(opaque_light, pixel, 0).rgb, traced, transmissive, fresnel_t);
+  vec3 image = opaque.covered ? opaque_color : camera.world.rgb;
 #if WITH_TRANSPARENT
-  if (transparent.covered) {
-    vec4 traced = use_traced && camera.traced.y > 0.5 ? texelFetch(transparent_reflection, pixel, 0) : no_trace;
-    vec3 surface_color = shade_layer(transparent, texelFetch(transparent_light, pixel, 0).rgb, traced,
-                                     transmissive, fresnel_t);
-    /* The transmitted part: straight through in raster, the refracted radiance where traced;
-       the 1 - alpha part goes straight on (as the tracer's alpha pass-through does). */
-    vec3 behind = image;
-    vec3 refracted = image;
-    if (use_traced && camera.traced.z > 0.5) {
-      vec4 traced_refraction = texelFetch(refraction, pixel, 0);
-      if (traced_refraction.a > 0.5) { refracted = traced_refraction.rgb; }
-    }
-    vec3 transmitted = (transmissive * (1.0 - fresnel_t)) * transparent.albedo * refracted;
-    float alpha = transparent.alpha_blend;
-    image = alpha * (surface_color + transmitted) + (1.0 - alpha) * behind;
-  }
+  traced = use_traced && camera.traced.y > 0.5 ? texelFetch(transparent_reflection, pixel, 0) : no_trace;
+  vec3 surface_color = shade_layer(transparent, texelFetch(transparent_light, pixel, 0).rgb, traced,
+                                   transmissive, fresnel_t);
+  /* The transmitted part: straight through in raster, the refracted radiance where traced;
+     the 1 - alpha part goes straight on (as the tracer's alpha pass-through does). */
+  vec4 traced_refraction = texelFetch(refraction, pixel, 0);
+  vec3 refracted = use_traced && camera.traced.z > 0.5 && traced_refraction.a > 0.5 ? traced_refraction.rgb : image;
+  vec3 transmitted = (transmissive * (1.0 - fresnel_t)) * transparent.albedo * refracted;
+  float alpha = transparent.alpha_blend;
+  image = transparent.covered ? alpha * (surface_color + transmitted) + (1.0 - alpha) * image : image;
 #endif
   return finite_radiance(image);
 }
