@@ -561,7 +561,8 @@ class GPUFrame:
             framebuffer.read_color(0, 0, self.width, self.height, channels, slot, kind, data=buffer)
         dtype = np.float32 if kind == "FLOAT" else np.uint32
         shape = (self.height, self.width, channels) if channels > 1 else (self.height, self.width)
-        return np.asarray(buffer, dtype=dtype).reshape(shape).copy()
+        # The array keeps the buffer it views alive: no copy.
+        return np.asarray(buffer, dtype=dtype).reshape(shape)
 
     def _read_layer(self, gpu, framebuffer, first_slot) -> GBufferLayer:
         position = self._read(gpu, framebuffer, first_slot, "FLOAT", 4)
