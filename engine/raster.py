@@ -11,10 +11,11 @@ context, even in background mode, where llvmpipe serves it on the CPU) or
    selection's A, P, D and the Normal and Depth passes).  Shadow maps are rendered
    only when their light or the geometry changed and stay on the GPU.
 2. ``gbuffer()``: the full layers read back, only when rays will be traced.
-3. ``shade(traced)``: one additive full-screen lighting pass per light (shadow-map
-   lookup, or the traced visibility where the tracer replaced it), then the composite
-   pass (ambient, reflections, transparency, traced reflections and refractions),
-   and one read-back of the final image.
+3. ``shade(traced)``: full-screen lighting passes of up to ``shaders.LIGHTS_PER_PASS``
+   lights per layer (shadow-map lookup, or the traced visibility where the tracer
+   replaced it; the transparent layer's passes only under its mask), then the
+   composite (ambient, reflections, transparency, traced reflections and
+   refractions), and one read-back of the final image.
 
 Read-back follows docs/platform-notes.md: a flat ``gpu.types.Buffer`` and a reshape.
 """
@@ -458,9 +459,9 @@ class GPUFrame:
         return values
 
     def _light(self, gpu, uploads):
-        """Adds each light to each layer's light target: one full-screen pass per light and layer;
-        the transparent layer's passes are depth-tested against its mask, so they shade only
-        the pixels it covers (llvmpipe, like a GPU, skips tiles that fail an early depth test,
+        """Each layer's light target: full-screen passes of up to LIGHTS_PER_PASS lights; the
+        transparent layer's passes are depth-tested against its mask, so they shade only the
+        pixels it covers (llvmpipe, like a GPU, skips tiles that fail an early depth test,
         where a branch in the shader would run masked over every pixel)."""
         targets = self.targets
         lights = self.snapshot.lights
