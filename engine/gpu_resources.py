@@ -58,6 +58,7 @@ class GPUResources:
         self._shadows = {}  # shadow key -> ShadowAtlas
         self._targets = {}  # (width, height) -> {name: GPUTexture}
         self._constants = {}  # small fixed objects: fullscreen quad, placeholder textures
+        self._max_fragment_samplers = None  # a property of the GL implementation
         self.created = Counter()
         self.freed = Counter()
         self.uploads = 0  # scene data sent to the GPU (meshes, textures, material tables)
@@ -99,6 +100,12 @@ class GPUResources:
         return not (self._shaders or self._meshes or self._textures or self._shadows or self._targets
                     or self._constants or self._material_table[1] is not None)
 
+    def max_fragment_samplers(self) -> int:
+        """Textures a fragment shader may sample here (16 at least in any GL)."""
+        if self._max_fragment_samplers is None:
+            self._max_fragment_samplers = int(gpu_module().capabilities.max_textures_frag_get())
+        return self._max_fragment_samplers
+
     def first_use(self, kind: str, state) -> bool:
         """True the first time ``state`` (hashable) of ``kind`` is drawn with these shaders."""
         key = (kind, state)
@@ -125,6 +132,9 @@ class GPUResources:
             builders.update({f"lighting{n}": (lambda n=n: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS,
                                                                                  DEPTH_BIAS_TEXELS, n))
                              for n in range(1, shaders.LIGHTS_PER_PASS + 1)})
+            builders.update({f"lighting{n}_composite": (lambda n=n: shaders.build_lighting(
+                gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS, n, with_composite=True))
+                for n in range(1, shaders.LIGHTS_PER_PASS + 1)})
             shader = self._shaders[name] = builders[name]()
             self.created["shader"] += 1
         return shader

@@ -118,10 +118,15 @@ class GPUFrame:
         setup_start = time.perf_counter()
         self._shaders = {name: self.resources.shader(name) for name in ("gbuffer", "resolve", "composite",
                                                                         "composite_opaque", "shadow")}
-        per_pass = shaders.LIGHTS_PER_PASS
-        for count in {min(per_pass, len(self.snapshot.lights) - first)
-                      for first in range(0, len(self.snapshot.lights), per_pass)}:
+        counts = self._light_counts()
+        for count in set(counts):
             self._shaders[f"lighting{count}"] = self.resources.shader(f"lighting{count}")
+        # All lights in one pass: that pass also composites the opaque layer (one full-screen
+        # pass less), if the implementation has the sampler it needs.
+        self._fused = len(counts) == 1 and (shaders.lighting_samplers(counts[0], with_composite=True)
+                                            <= self.resources.max_fragment_samplers())
+        if self._fused:
+            self._shaders[f"lighting{counts[0]}_composite"] = self.resources.shader(f"lighting{counts[0]}_composite")
         self.targets = self.resources.targets(self.width, self.height)
         self.material_table = self.resources.material_table(self.materials)
         self._draw_list = []
@@ -182,6 +187,11 @@ class GPUFrame:
             result.append(stored)
         return tuple(result)
 
+    def _light_counts(self) -> list:
+        """Lights per lighting pass (LIGHTS_PER_PASS, the rest in the last)."""
+        per_pass, lights = shaders.LIGHTS_PER_PASS, len(self.snapshot.lights)
+        return [min(per_pass, lights - first) for first in range(0, lights, per_pass)]
+
     def shade(self, traced, measure_change: bool = False) -> np.ndarray | None:
         """Deferred lighting and composite with the tracer's results; returns Combined (h, w, 4),
         or None when ``read_combined`` is off (the frame target "combined" holds it).
@@ -193,11 +203,10 @@ class GPUFrame:
         self._measure = bool(measure_change)
         # A driver compiles a shader for each pipeline state on its first draw (llvmpipe JITs the
         # fragment code then): the first frame of a configuration pays it once, as set-up.
-        per_pass = shaders.LIGHTS_PER_PASS
-        lights = len(self.snapshot.lights)
-        configuration = (tuple(min(per_pass, lights - first) for first in range(0, lights, per_pass)),
-                         self._transparent_drawn, self._measure)
+        configuration = (tuple(self._light_counts()), self._fused, self._transparent_drawn, self._measure)
         first_use = self.resources.first_use("shade", configuration)
+        self._traced_flags = (float("opaque" in uploads["reflection"]), float("transparent" in uploads["reflection"]),
+                              float(uploads["refraction"] is not None))
         self._light(gpu, uploads)
         combined = self._composite(gpu, uploads)
         self.stats["lighting_ms"] = _ms(start)
@@ -466,11 +475,16 @@ class GPUFrame:
         targets = self.targets
         lights = self.snapshot.lights
         layers = ("opaque", "transparent") if self._transparent_drawn else ("opaque",)
+        fused = self._fused and bool(lights)
         framebuffers = {}
         for layer in layers:
             slots = (targets[f"{layer}_light"],)
+            if fused and layer == "opaque":
+                slots += (targets["combined"],)
             if self._measure:
                 slots += (targets["shadow_change"],)  # without the attachment, out_change is discarded
+                if fused and layer == "opaque":
+                    slots += (targets["traced_change"],)
             framebuffers[layer] = gpu.types.GPUFrameBuffer(
                 color_slots=slots, depth_slot=targets["transparent_mask"] if layer == "transparent" else None)
             # The first pass writes every pixel the composite reads (the whole frame for the opaque
@@ -481,8 +495,9 @@ class GPUFrame:
                     framebuffers[layer].clear(color=(0.0, 0.0, 0.0, 0.0))
         if not lights:
             return
-        camera_ubo = self._camera_ubo(gpu)
+        camera_ubo = self._camera_ubo(gpu, self._traced_flags)
         no_visibility = self.resources.placeholder(-1.0)
+        empty = self.resources.placeholder(0.0)
         per_pass = shaders.LIGHTS_PER_PASS
         groups = []  # (shader, its batch, the lights' UBO, light indices) per pass
         for first in range(0, len(lights), per_pass):
@@ -502,6 +517,11 @@ class GPUFrame:
                     gpu.state.depth_mask_set(False)
                     for number, (shader, batch, light_ubo, indices) in enumerate(groups):
                         gpu.state.blend_set("ADDITIVE_PREMULT" if number > 0 or self._measure else "NONE")
+                        if fused and layer == "opaque":
+                            # The one pass of the opaque layer writes Combined too: not blended.
+                            gpu.state.blend_set("NONE")
+                            shader = self._shaders[f"lighting{len(indices)}_composite"]
+                            batch = self.resources.fullscreen_batch(shader)
                         shader.bind()
                         shader.uniform_block("camera", camera_ubo)
                         shader.uniform_block("lights", light_ubo)
@@ -519,6 +539,8 @@ class GPUFrame:
                             shader.uniform_sampler(f"visibility{slot}",
                                                    visibility if visibility is not None else no_visibility)
                         shader.uniform_int("traced_lights", traced)
+                        if fused and layer == "opaque":
+                            shader.uniform_sampler("opaque_reflection", uploads["reflection"].get("opaque", empty))
                         batch.draw(shader)
                     gpu.state.depth_test_set("NONE")
         finally:
@@ -528,9 +550,7 @@ class GPUFrame:
         targets = self.targets
         slots = (targets["combined"], targets["traced_change"]) if self._measure else (targets["combined"],)
         framebuffer = gpu.types.GPUFrameBuffer(color_slots=slots)
-        flags = (float("opaque" in uploads["reflection"]), float("transparent" in uploads["reflection"]),
-                 float(uploads["refraction"] is not None))
-        camera_ubo = self._camera_ubo(gpu, flags)
+        camera_ubo = self._camera_ubo(gpu, self._traced_flags)
         empty = self.resources.placeholder(0.0)
 
         def bind(shader, with_transparent):
@@ -548,7 +568,8 @@ class GPUFrame:
         gpu.state.blend_set("NONE")
         # The opaque layer over the whole frame, then both layers where the transparent one
         # covers the pixel (the pixels its mask lets through are drawn again, in full).
-        self._fullscreen(gpu, "composite_opaque", framebuffer, lambda shader: bind(shader, False))
+        if not (self._fused and self.snapshot.lights):  # else the lighting pass composited it
+            self._fullscreen(gpu, "composite_opaque", framebuffer, lambda shader: bind(shader, False))
         if self._transparent_drawn:
             masked = gpu.types.GPUFrameBuffer(color_slots=slots, depth_slot=targets["transparent_mask"])
             self._fullscreen(gpu, "composite", masked, lambda shader: bind(shader, True), depth_test="GREATER")

@@ -184,6 +184,21 @@ vec3 brdf_cosine(Surface s, vec3 l) {
   return cosine > 0.0 ? (s.diffuse_color * (1.0 - f) + f * specular) * n_dot_l : vec3(0.0);
 }
 
+/* The layer's colour: emission, the accumulated lights, ambient diffuse and the reflection
+   (the uniform environment, or the traced radiance where a ray was traced). */
+vec3 shade_layer(Surface s, vec3 light_sum, vec4 traced_reflection, out float transmissive, out float fresnel_t) {
+  vec3 world = camera.world.rgb;
+  float m = 1.0 - clamp(s.n_dot_v, 0.0, 1.0);
+  float ceiling = min(max(1.0 - s.roughness, max(s.f0.r, max(s.f0.g, s.f0.b))), specular_f90(s.f0));
+  vec3 env_fresnel = s.f0 + (max(vec3(ceiling), s.f0) - s.f0) * (m * m * m * m * m);
+  vec3 color = s.emission + light_sum + s.albedo * s.diffuse_weight * (1.0 - env_fresnel) * world;
+  transmissive = s.transmission * (1.0 - s.metallic);
+  fresnel_t = fresnel_dielectric(clamp(dot(s.normal, s.view), 0.0, 1.0), s.ior);
+  vec3 reflect_weight = env_fresnel * (1.0 - transmissive) + transmissive * fresnel_t;
+  vec3 reflected = traced_reflection.a > 0.5 ? traced_reflection.rgb : world;
+  return color + reflect_weight * reflected;
+}
+
 vec3 finite_radiance(vec3 c) {
   bvec3 bad = isnan(c);
   c = vec3(bad.x ? 0.0 : c.x, bad.y ? 0.0 : c.y, bad.z ? 0.0 : c.z);
@@ -286,6 +301,19 @@ PHRT_ADD_LIGHTS
   /* A pixel the layer does not cover gets nothing (selected, not branched: see cube_face). */
   out_light = vec4(s.covered ? total : vec3(0.0), 0.0);
   out_change = vec4(0.0, s.covered ? change : 0.0, 0.0, 0.0);
+#if WITH_COMPOSITE
+  /* The opaque layer's composite in the same pass (COMPOSITE_FRAG's composite_pixel without
+     the transparent layer, which its own masked pass draws over it). */
+  float transmissive;
+  float fresnel_t;
+  vec4 traced = camera.traced.x > 0.5 ? texelFetch(opaque_reflection, pixel, 0) : vec4(0.0);
+  vec3 image = finite_radiance(s.covered ? shade_layer(s, total, traced, transmissive, fresnel_t) : camera.world.rgb);
+  out_combined = vec4(image, 1.0);
+  /* What the traced reflection changed (x) and the traced shadows (y), as the composite writes it. */
+  vec3 raster = finite_radiance(s.covered ? shade_layer(s, total, vec4(0.0), transmissive, fresnel_t)
+                                          : camera.world.rgb);
+  out_traced_change = vec4(min(dot(abs(image - raster), PHRT_LUMINANCE), 1.0), min(out_change.y, 1.0), 0.0, 0.0);
+#endif
 }
 """
 
@@ -308,21 +336,6 @@ void main() {
 """
 
 COMPOSITE_FRAG = """
-/* The layer's colour: emission, the accumulated lights, ambient diffuse and the reflection
-   (the uniform environment, or the traced radiance where a ray was traced). */
-vec3 shade_layer(Surface s, vec3 lights, vec4 traced_reflection, out float transmissive, out float fresnel_t) {
-  vec3 world = camera.world.rgb;
-  float m = 1.0 - clamp(s.n_dot_v, 0.0, 1.0);
-  float ceiling = min(max(1.0 - s.roughness, max(s.f0.r, max(s.f0.g, s.f0.b))), specular_f90(s.f0));
-  vec3 env_fresnel = s.f0 + (max(vec3(ceiling), s.f0) - s.f0) * (m * m * m * m * m);
-  vec3 color = s.emission + lights + s.albedo * s.diffuse_weight * (1.0 - env_fresnel) * world;
-  transmissive = s.transmission * (1.0 - s.metallic);
-  fresnel_t = fresnel_dielectric(clamp(dot(s.normal, s.view), 0.0, 1.0), s.ior);
-  vec3 reflect_weight = env_fresnel * (1.0 - transmissive) + transmissive * fresnel_t;
-  vec3 reflected = traced_reflection.a > 0.5 ? traced_reflection.rgb : world;
-  return color + reflect_weight * reflected;
-}
-
 /* The pixel's colour with the traced terms (``use_traced``) or the raster ones.  The variant
    WITH_TRANSPARENT 0 shades the opaque layer only: it is drawn over the whole frame, and the
    full variant then only where the transparent layer covers the pixel (depth-tested against
@@ -490,25 +503,39 @@ def _fullscreen_pass(gpu, typedefs, samplers, outputs, fragment_source, *, unifo
     return gpu.shader.create_from_info(info)
 
 
-def build_lighting(gpu, normal_offset_texels, depth_bias_texels, light_count=LIGHTS_PER_PASS):
+def lighting_samplers(light_count: int, with_composite: bool = False) -> int:
+    """Samplers a lighting variant binds (see build_lighting)."""
+    return 4 + 2 * int(light_count) + int(bool(with_composite))
+
+
+def build_lighting(gpu, normal_offset_texels, depth_bias_texels, light_count=LIGHTS_PER_PASS, with_composite=False):
     """``light_count`` lights over one G-buffer layer (bound as ``layer_*``), added to its light
-    target."""
+    target; ``with_composite``: also the opaque layer's composite (all its lights in this one
+    pass), written to Combined (and the traced change when measured)."""
     info = gpu.types.GPUShaderCreateInfo()
     info.define("LIGHTS_PER_PASS", str(LIGHTS_PER_PASS))
+    info.define("WITH_COMPOSITE", "1" if with_composite else "0")
     info.typedef_source(CAMERA_STRUCT + LIGHT_STRUCT)
     info.uniform_buf(0, "CameraData", "camera")
     info.uniform_buf(1, "LightSet", "lights")
     names = ["layer_position", "layer_normal", "layer_albedo", "material_table"]
     for i in range(light_count):
         names += [f"shadow_map{i}", f"visibility{i}"]
+    if with_composite:
+        names.append("opaque_reflection")
+    assert len(names) == lighting_samplers(light_count, with_composite)
     for slot, name in enumerate(names):
         info.sampler(slot, "FLOAT_2D", name)
     _defines(info, normal_offset_texels, depth_bias_texels)
     info.push_constant("INT", "measure_change")
     info.push_constant("INT", "traced_lights")
     info.vertex_in(0, "VEC2", "pos")
-    info.fragment_out(0, "VEC4", "out_light")
-    info.fragment_out(1, "VEC4", "out_change")
+    # Colour targets in this order: light, [combined,] shadow change[, traced change] (the
+    # change targets are attached only when measured: the last ones may be missing).
+    outputs = ["out_light", "out_combined", "out_change", "out_traced_change"] if with_composite \
+        else ["out_light", "out_change"]
+    for index, name in enumerate(outputs):
+        info.fragment_out(index, "VEC4", name)
     info.vertex_source(FULLSCREEN_VERT)
     info.fragment_source(COMMON_LIB + LIGHTING_FRAG.replace("PHRT_ADD_LIGHTS\n", "".join(
         f"  total += light_layer({i}, shadow_map{i}, s, (traced_lights & {1 << i}) != 0 "

@@ -249,3 +249,34 @@ def test_the_first_draw_of_a_lighting_configuration_is_counted_as_set_up():
     setups = run_on_gpu(scene, job)
     assert setups[0] > 0 and setups[1] == 0.0
     assert setups[2] > 0 and setups[3] == 0.0  # measuring the traced change draws other targets
+
+
+def test_the_lighting_pass_that_also_composites_equals_the_separate_composite():
+    """With all lights in one pass, that pass composites the opaque layer too: the image and the
+    measured traced change (the error-aware relevance) equal the separate composite's."""
+    scene = lit_scene()
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        results = []
+        for fused in (True, False):
+            frame = raster.GPUFrame(snapshot)
+            frame.draw()
+            assert frame._fused  # five lights: one pass, with the sampler it needs
+            frame._fused = fused
+            gbuffer = frame.gbuffer()
+            traced = TracedTerms()
+            opaque = np.flatnonzero(gbuffer.opaque.covered.ravel())
+            chosen = np.random.default_rng(5).choice(opaque, size=len(opaque) // 4, replace=False)
+            traced.shadow_visibility[("opaque", 1)] = (chosen, np.zeros(len(chosen), np.float32))
+            traced.reflection["opaque"] = (chosen[:800], np.tile([[0.1, 1.5, 0.1]], (800, 1)))
+            transparent = np.flatnonzero(gbuffer.transparent.covered.ravel())
+            traced.refraction = (transparent, np.tile([[0.0, 0.0, 3.0]], (len(transparent), 1)))
+            image = frame.shade(traced, measure_change=True)
+            results.append((image, frame.traced_change()))
+        return results
+
+    (fused_image, fused_change), (image, change) = run_on_gpu(scene, job)
+    assert np.abs(fused_change[..., 0]).max() > 0.1 and np.abs(fused_change[..., 1]).max() > 0.1
+    np.testing.assert_allclose(fused_image, image, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(fused_change, change, rtol=1e-5, atol=1e-6)
