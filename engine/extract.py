@@ -40,8 +40,16 @@ def _read_mesh(mesh):
     positions = np.empty(n_vertices * 3, np.float32)
     mesh.vertices.foreach_get("co", positions)
     positions = positions.reshape(-1, 3)
-    positions_key = geometry_key(positions)
-    key = (mesh.name, n_vertices, len(mesh.polygons), len(mesh.loops), positions_key)
+    # The content key of positions equal to the ones this mesh had last time is not hashed again
+    # (a comparison is ~10x cheaper than the hash); a changed mesh is hashed.
+    shape_key = (mesh.name, n_vertices, len(mesh.polygons), len(mesh.loops))
+    last = session.current().meshes.get(("positions",) + shape_key)
+    if last is not None and np.array_equal(last[0], positions):
+        positions_key = last[1]
+    else:
+        positions_key = geometry_key(positions)
+        session.current().meshes.put(("positions",) + shape_key, (positions, positions_key))
+    key = shape_key + (positions_key,)
     cached = session.current().meshes.get(key)
     if cached is not None:
         return cached
