@@ -280,3 +280,27 @@ def test_the_lighting_pass_that_also_composites_equals_the_separate_composite():
     assert np.abs(fused_change[..., 0]).max() > 0.1 and np.abs(fused_change[..., 1]).max() > 0.1
     np.testing.assert_allclose(fused_image, image, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(fused_change, change, rtol=1e-5, atol=1e-6)
+
+
+def test_the_lighting_pass_composites_only_when_the_gl_has_the_samplers_for_it():
+    """All lights in one pass composite the opaque layer there only if the implementation offers
+    the samplers (4 + 2 per light + 1): a GL with fewer composites in its own pass, to the same image."""
+    scene = lit_scene()  # five lights: 15 samplers when composited in the lighting pass
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        resources = session.current().resources
+        found = resources.max_fragment_samplers()
+        images = []
+        for available in (15, 14):
+            resources._max_fragment_samplers = available
+            frame = raster.GPUFrame(snapshot)
+            frame.draw()
+            images.append((frame._fused, frame.shade(None)))
+        resources._max_fragment_samplers = found
+        return found, images
+
+    found, ((fused, image), (separate, separate_image)) = run_on_gpu(scene, job)
+    assert found >= 16  # every GL offers 16
+    assert fused and not separate
+    np.testing.assert_allclose(image, separate_image, rtol=1e-5, atol=1e-6)
