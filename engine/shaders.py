@@ -287,9 +287,10 @@ vec3 light_layer(int i, sampler2D shadow_map, Surface s, float traced_visibility
 }
 
 /* One layer and up to LIGHTS_PER_PASS lights per pass (a variant per count: llvmpipe runs
-   every branch for every pixel, so a light slot that is not used must not be compiled).  The transparent layer's passes are drawn only where it covers the pixel
-   (depth-tested against the mask the resolve pass writes), so a frame pays for glass only
-   where there is glass. */
+   every branch for every pixel, so a light slot that is not used must not be compiled).
+   The transparent layer's passes are drawn only where it covers the pixel (depth-tested
+   against the mask the resolve pass writes), so a frame pays for glass only where there is
+   glass.  PHRT_ADD_LIGHTS becomes one light_layer() call per light (build_lighting). */
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
   float change = 0.0;
