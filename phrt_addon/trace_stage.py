@@ -4,7 +4,10 @@
 (``trace_scene.TraceScene``) and the prepared textures.  ``run()`` takes the read-back
 G-buffer layers and the selection and returns a ``TraceResult``: the ``TracedTerms``
 the lighting and composite use in place of the raster terms, the counters the cost
-model learns from, and the rays cast for each element.
+model learns from, and the rays cast for each element (the same rays as the counters,
+split between elements: the cost model's per-element ray ratios and per-effect ms per ray
+must share one unit, or its global residual has to absorb the difference, which depends on
+what is selected).
 
 - Shadows: for each light, the pixels a selected caster can shadow (``shadow_region``)
   get traced visibility in place of the shadow map.
@@ -30,6 +33,20 @@ def _ms(start):
     return (time.perf_counter() - start) * 1000.0
 
 
+def _attribute(element_rays, elements, weights, rays):
+    """Add ``rays`` to ``element_rays`` of ``elements`` in proportion to ``weights``."""
+    total = float(np.sum(weights))
+    if rays > 0 and total > 0:
+        np.add.at(element_rays, np.asarray(elements, np.int64), rays * np.asarray(weights, np.float64) / total)
+
+
+def _attribute_to_pixels(element_rays, pixel_element, rays):
+    """Add ``rays`` (every ray a batch of bounce rays cast, their hits' shadow rays and further
+    bounces included) to the elements of the batch's pixels, in proportion to their pixels."""
+    elements, pixels = np.unique(pixel_element, return_counts=True)
+    _attribute(element_rays, elements, pixels, rays)
+
+
 @dataclass
 class TraceCounters:
     """Rays cast and ms spent per effect; ``upload_ms``: a static Embree build (one-time work)."""
@@ -51,7 +68,10 @@ class TraceCounters:
 class TraceResult:
     traced: TracedTerms
     counters: TraceCounters = field(default_factory=TraceCounters)
-    element_rays: np.ndarray = None  # (n_elements,) rays cast for each element
+    # (n_elements,) rays cast for each element, in the units of the counters: every ray of an effect
+    # (a bounce's hit shadow rays and further bounces included) goes to the elements whose pixels
+    # cast it, shared in proportion where casters' shadow regions overlap; summed, the counters' rays.
+    element_rays: np.ndarray = None
 
 
 class TraceStage:
@@ -123,9 +143,10 @@ class TraceStage:
                     points_world = pixels.world()
                 index = ShadowRegionIndex(light, points_world)
                 region = np.zeros(len(pixels), bool)
+                caster_regions = []
                 for caster in casters:
                     caster_region = index.region(element_bounds[caster])
-                    element_rays[caster] += np.count_nonzero(caster_region)
+                    caster_regions.append(caster_region)
                     region |= caster_region
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:
@@ -142,6 +163,9 @@ class TraceStage:
                 traced.shadow_visibility[(layer_name, light_index)] = (
                     pixels.flat[idx], np.where(blocked, 0.0, 1.0).astype(np.float32))
                 counters.shadow_rays += len(idx)
+                # A ray in overlapping casters' regions is shared between them.
+                _attribute(element_rays, casters, [np.count_nonzero(caster_region[idx]) for caster_region
+                                                   in caster_regions], len(idx))
         counters.shadow_ms = _ms(start)
         # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
         bounces = int(snapshot.settings.max_bounces) >= 1
@@ -161,10 +185,11 @@ class TraceStage:
             view_dirs = pixels.view_directions(idx)
             points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
             direction = leave_surface(shading.reflect(view_dirs, pixels.normals(idx, view_dirs)), normal)
+            layer_rays_before = tracer.rays + tracer.shadow_rays
             radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
             blend = reflection_blend(pixels.roughness[idx])[:, None]
             traced.reflection[layer_name] = (pixels.flat[idx], blend * radiance + (1.0 - blend) * world)
-            np.add.at(element_rays, element_of[idx], 1)
+            _attribute_to_pixels(element_rays, element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.reflection_ms = _ms(start)
 
@@ -184,9 +209,10 @@ class TraceStage:
                 ior = materials.ior[pixels.material[idx]]
                 direction, _ = shading.refract(view_dirs, pixels.normals(idx, view_dirs), 1.0 / ior)
                 direction = leave_surface(direction, normal, side=-1.0)
+                layer_rays_before = tracer.rays + tracer.shadow_rays
                 radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
                 traced.refraction = (pixels.flat[idx], radiance)
-                np.add.at(element_rays, element_of[idx], 1)
+                _attribute_to_pixels(element_rays, element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.refraction_ms = _ms(start)
         return TraceResult(traced=traced, counters=counters, element_rays=element_rays)
