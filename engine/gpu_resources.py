@@ -263,7 +263,14 @@ class GPUResources:
         "normal_depth": "RGBA32F", "front_element": "R32UI",
         "opaque_light": "RGBA32F", "transparent_light": "RGBA32F", "combined": "RGBA32F",
         "shadow_change": "RGBA32F", "traced_change": "RGBA32F",  # the error-aware relevance only
+        # Bound where a frame traced nothing: the size and format of the traced textures they
+        # stand for (llvmpipe, like other drivers, compiles a shader variant per sampled texture
+        # format and size class: a 1x1 stand-in would make every change of what is traced a new
+        # variant, a 0.3-0.7 s JIT in the middle of a replay).
+        "no_visibility": "R32F", "no_radiance": "RGBA32F",
     }
+    # What the stand-ins hold: -1 (the shadow map stays), no traced radiance (alpha 0).
+    TARGET_CLEAR = {"no_visibility": (-1.0,), "no_radiance": (0.0, 0.0, 0.0, 0.0)}
 
     def target(self, name: str, size) -> object | None:
         """One frame target at this resolution, if it exists (the viewport draws "combined")."""
@@ -280,6 +287,8 @@ class GPUResources:
                 self.freed["target"] += len(self._targets.pop(old))
             targets = self._targets[key] = {name: gpu.types.GPUTexture(key, format=fmt)
                                             for name, fmt in self.TARGET_FORMATS.items()}
+            for name, value in self.TARGET_CLEAR.items():
+                targets[name].clear(format="FLOAT", value=value)
             self.created["target"] += len(targets)
         return targets
 

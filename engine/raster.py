@@ -496,8 +496,8 @@ class GPUFrame:
         if not lights:
             return
         camera_ubo = self._camera_ubo(gpu, self._traced_flags)
-        no_visibility = self.resources.placeholder(-1.0)
-        empty = self.resources.placeholder(0.0)
+        no_shadow_map = self.resources.placeholder(-1.0)
+        no_visibility, empty = targets["no_visibility"], targets["no_radiance"]
         per_pass = shaders.LIGHTS_PER_PASS
         groups = []  # (shader, its batch, the lights' UBO, light indices) per pass
         for first in range(0, len(lights), per_pass):
@@ -535,7 +535,7 @@ class GPUFrame:
                             atlas = self.atlases.get(index)
                             traced |= (visibility is not None) << slot
                             shader.uniform_sampler(f"shadow_map{slot}",
-                                                   atlas.texture if atlas is not None else no_visibility)
+                                                   atlas.texture if atlas is not None else no_shadow_map)
                             shader.uniform_sampler(f"visibility{slot}",
                                                    visibility if visibility is not None else no_visibility)
                         shader.uniform_int("traced_lights", traced)
@@ -551,7 +551,7 @@ class GPUFrame:
         slots = (targets["combined"], targets["traced_change"]) if self._measure else (targets["combined"],)
         framebuffer = gpu.types.GPUFrameBuffer(color_slots=slots)
         camera_ubo = self._camera_ubo(gpu, self._traced_flags)
-        empty = self.resources.placeholder(0.0)
+        empty = targets["no_radiance"]
 
         def bind(shader, with_transparent):
             shader.uniform_block("camera", camera_ubo)

@@ -304,3 +304,33 @@ def test_the_lighting_pass_composites_only_when_the_gl_has_the_samplers_for_it()
     assert found >= 16  # every GL offers 16
     assert fused and not separate
     np.testing.assert_allclose(image, separate_image, rtol=1e-5, atol=1e-6)
+
+
+def test_what_stands_for_untraced_terms_has_the_traced_textures_size_and_format():
+    """A driver compiles a shader variant per sampled texture format and size class (llvmpipe
+    JITs one in 0.3-0.7 s): the textures bound where nothing was traced must look like the
+    traced ones to the sampler, or every change of what is traced mid-replay compiles anew.
+    They read as "keep the shadow map" (-1) and "no traced radiance" (alpha 0)."""
+    scene = lit_scene()
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        frame = raster.GPUFrame(snapshot)
+        frame.draw()
+        gbuffer = frame.gbuffer()
+        traced = TracedTerms()
+        opaque = np.flatnonzero(gbuffer.opaque.covered.ravel())[:50]
+        traced.shadow_visibility[("opaque", 0)] = (opaque, np.zeros(len(opaque), np.float32))
+        traced.reflection["opaque"] = (opaque, np.ones((len(opaque), 3)))
+        uploads = frame._upload_traced(raster.gpu_module(), traced)
+        describe = lambda texture: (texture.format, texture.width, texture.height)  # noqa: E731
+        standins = {name: frame.targets[name] for name in ("no_visibility", "no_radiance")}
+        return ({name: describe(texture) for name, texture in standins.items()},
+                describe(uploads["visibility"][("opaque", 0)]), describe(uploads["reflection"]["opaque"]),
+                {name: np.asarray(texture.read().to_list(), np.float32) for name, texture in standins.items()})
+
+    standins, visibility, reflection, values = run_on_gpu(scene, job)
+    assert standins["no_visibility"] == visibility == ("R32F", WIDTH, HEIGHT)
+    assert standins["no_radiance"] == reflection == ("RGBA32F", WIDTH, HEIGHT)
+    assert np.all(values["no_visibility"] == -1.0)
+    assert np.all(values["no_radiance"] == 0.0)
