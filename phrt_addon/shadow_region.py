@@ -165,3 +165,120 @@ class ShadowRegionIndex:
         result = np.zeros(self.n, bool)
         result[self.order[start:stop]] = self._test(self.sorted_coords[start:stop], bounds)
         return result
+
+
+class PointChunks:
+    """The points in small groups with a bounding sphere each (float64): a caster's cylinder or
+    cone that misses a sphere misses all of its points.  ``keys``: a group id per point (a
+    pixel's screen tile: compact groups); without them, runs of ``size`` consecutive points
+    (points in pixel order make runs along a row)."""
+
+    def __init__(self, points, keys=None, size: int = 64):
+        points = np.asarray(points, dtype=np.float64)
+        self.n = len(points)
+        if keys is None:
+            self.order = None
+            self.starts = np.arange(0, self.n, int(size))
+        else:
+            keys = np.asarray(keys)
+            if keys.shape != (self.n,):
+                raise ValueError(f"{keys.shape} keys for {self.n} points")
+            self.order = np.argsort(keys, kind="stable")
+            keys = keys[self.order]
+            points = points[self.order]
+            self.starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if self.n else np.zeros(0, np.int64)
+        self.counts = np.diff(np.r_[self.starts, self.n])
+        if self.n == 0:
+            self.centre, self.radius = np.zeros((0, 3)), np.zeros(0)
+            return
+        low = np.minimum.reduceat(points, self.starts, axis=0)
+        high = np.maximum.reduceat(points, self.starts, axis=0)
+        if np.isnan(low).any() or np.isnan(high).any():
+            # A NaN point (no surface) must not hide the others of its group (fmin ignores NaN,
+            # at twice the cost); a group of NaN only, or with an infinite point, keeps
+            # non-finite bounds and every caster tests its points.
+            low = np.fmin.reduceat(points, self.starts, axis=0)
+            high = np.fmax.reduceat(points, self.starts, axis=0)
+        self.centre = (low + high) / 2.0
+        with np.errstate(invalid="ignore", over="ignore"):
+            self.radius = 0.5 * np.sqrt(np.sum((high - low) ** 2, axis=1))
+
+    def points_of(self, chunks: np.ndarray) -> np.ndarray:
+        """Indices of the points in the chunks ``chunks`` (a boolean mask over chunks)."""
+        starts, counts = self.starts[chunks], self.counts[chunks]
+        total = int(counts.sum())
+        if total == 0:
+            return np.zeros(0, np.int64)
+        # Consecutive ranges [start, start + count) without a Python loop.
+        offsets = np.repeat(starts - np.r_[0, np.cumsum(counts)[:-1]], counts)
+        idx = offsets + np.arange(total)
+        return idx if self.order is None else self.order[idx]
+
+
+class TiledShadowRegions:
+    """``shadow_region`` for a few casters and one light over many points (a layer's pixels;
+    ``ShadowRegionIndex`` suits many casters over few points).
+
+    The points are grouped in runs (``PointChunks``, shareable between lights); a caster first
+    tests the runs' bounding spheres against its cylinder (sun) or cone (local lights), then
+    ``shadow_region`` runs on the points of the runs it may reach only.  A light whose casters
+    shadow little of the frame costs little.  The same answer as ``shadow_region`` (float64,
+    at any distance from the origin)."""
+
+    def __init__(self, light, points, chunks: PointChunks | None = None):
+        self.light = light
+        self.points = np.asarray(points, dtype=np.float64)
+        self.n = len(self.points)
+        self.chunks = chunks if chunks is not None else PointChunks(self.points)
+        if self.chunks.n != self.n:
+            raise ValueError(f"chunks of {self.chunks.n} points for {self.n} points")
+        self.queries = 0
+        self.points_tested = 0
+        if light.kind == "SUN":
+            self.direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+        else:
+            self.origin = np.asarray(light.position, dtype=np.float64)
+
+    def _chunks_reached(self, bounds) -> np.ndarray:
+        """Chunks whose bounding sphere may hold a point of the caster's region (conservative,
+        with a margin for rounding)."""
+        low, high = bounds
+        centre = (low + high) / 2.0
+        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+        chunk_centre, chunk_radius = self.chunks.centre, self.chunks.radius
+        with np.errstate(invalid="ignore", over="ignore"):
+            # float64 rounding: a few ulps of the largest magnitude involved
+            slack = 1e-9 * (np.abs(chunk_centre).max(axis=1) + chunk_radius + float(np.abs(centre).max()) + radius
+                            + (0.0 if self.light.kind == "SUN" else float(np.abs(self.origin).max()))) + 1e-6
+            reach = chunk_radius + slack
+            if self.light.kind == "SUN":
+                relative = chunk_centre - centre
+                along = relative @ self.direction
+                lateral = np.sqrt(np.maximum(np.sum(relative * relative, axis=1) - along * along, 0.0))
+                reached = (along + reach > -radius) & (lateral - reach <= radius)
+            else:
+                to_centre = centre - self.origin
+                distance = float(np.linalg.norm(to_centre))
+                if distance <= radius:
+                    return np.ones(len(chunk_centre), bool)
+                to_chunk = chunk_centre - self.origin
+                chunk_distance = np.sqrt(np.sum(to_chunk * to_chunk, axis=1))
+                cos_angle = np.clip((to_chunk @ to_centre) / np.maximum(chunk_distance * distance, 1e-300), -1.0, 1.0)
+                # The widest angle a point of the sphere makes with the direction to its centre.
+                spread = np.arcsin(np.clip(reach / np.maximum(chunk_distance, 1e-300), 0.0, 1.0))
+                cone = np.arcsin(min(radius / distance, 1.0))
+                reached = ((chunk_distance <= reach) | (np.arccos(cos_angle) <= cone + spread + 1e-4)) \
+                    & (chunk_distance + reach > distance - radius)
+            # Unknown bounds (a NaN or infinite point in the group): its points are tested.
+            reached |= ~np.isfinite(chunk_radius)
+        return reached
+
+    def region(self, bounds) -> np.ndarray:
+        self.queries += 1
+        result = np.zeros(self.n, bool)
+        idx = self.chunks.points_of(self._chunks_reached(bounds))
+        if len(idx):
+            self.points_tested += len(idx)
+            with np.errstate(invalid="ignore", over="ignore"):  # a non-finite point is in no region
+                result[idx] = shadow_region(self.light, bounds, self.points[idx])
+        return result

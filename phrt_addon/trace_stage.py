@@ -26,11 +26,22 @@ import numpy as np
 
 from . import rules, shading
 from .frame_types import TracedTerms
-from .shadow_region import ShadowRegionIndex
+from .shadow_region import PointChunks, TiledShadowRegions
+
+
+# Pixels are grouped in square screen tiles for the shadow regions' culling (shadow_region.py).
+TILE_PIXELS = 8
 
 
 def _ms(start):
     return (time.perf_counter() - start) * 1000.0
+
+
+def screen_tiles(pixels, size: int = TILE_PIXELS) -> np.ndarray:
+    """The screen tile (``size`` x ``size`` pixels) of each of a layer's pixels."""
+    width = pixels.layer.covered.shape[1]
+    rows, cols = np.divmod(pixels.flat, width)
+    return (rows // size) * (-(-width // size)) + cols // size
 
 
 def _attribute(element_rays, elements, weights, rays):
@@ -141,7 +152,8 @@ class TraceStage:
                     continue
                 if points_world is None:
                     points_world = pixels.world()
-                index = ShadowRegionIndex(light, points_world)
+                    chunks = PointChunks(points_world, keys=screen_tiles(pixels))  # shared by the layer's lights
+                index = TiledShadowRegions(light, points_world, chunks)
                 region = np.zeros(len(pixels), bool)
                 caster_regions = []
                 for caster in casters:
