@@ -59,6 +59,10 @@ STAGES = ("raster", "select", "composite")
 # Priors, used only until the first measurement of each quantity.  Rough values
 # for a 640x480 frame on 2 CPU cores (see docs/platform-notes.md).
 STAGE_PRIOR_MS = {"raster": 50.0, "select": 1.0, "composite": 5.0}
+# The fixed part of a frame that traces anything (layers read back, the moving objects' BVH,
+# per-frame tables): learned from the trace time its effects' own timers do not account for;
+# not charged before its first measurement (this prior only seeds the estimator).
+TRACE_OVERHEAD_PRIOR_MS = 1.0
 MS_PER_RAY_PRIOR = {"shadows": 1.5e-4, "reflections": 3e-4, "refractions": 3e-4}
 # ms per unit of the paper's cost C (V normalised to 1 for the frame's most
 # visible candidate): the most visible element with Q = 1 is guessed at 20 ms.
@@ -175,6 +179,9 @@ class FrameStats:
     effect_ms: Mapping[str, float] = field(default_factory=dict)
     effect_rays: Mapping[str, float] = field(default_factory=dict)
     element_rays: Sequence[float] | np.ndarray | None = None
+    # Of ``trace_ms``, what no effect's timer holds (the fixed cost of tracing anything); None:
+    # not measured (the whole trace time is then shared between the effects, as per-ray cost).
+    trace_overhead_ms: float | None = None
 
 
 def _finite_positive(value) -> float | None:
@@ -208,6 +215,7 @@ class CostModel:
         self._ray_share = np.full(len(EFFECTS), 1.0 / len(EFFECTS))
         self._paper_ms_per_cost = self._estimate(paper_ms_per_cost_prior)
         self._residual = self._estimate(1.0)
+        self._trace_overhead = self._estimate(TRACE_OVERHEAD_PRIOR_MS, floor=STAGE_FLOOR_MS)
         self._rays_ratio: dict[str, RobustEstimate] = {}
         # The learned ratios as an array in the last frame's element order (the
         # engine keeps the order stable, so lookups by name are rarely needed).
@@ -237,6 +245,11 @@ class CostModel:
                                              0.0, MAX_PREDICTED_MS))
         return float(min(max(budget - sum(stages.values()), 0.0), MAX_PREDICTED_MS))
 
+    def trace_overhead_ms(self) -> float:
+        """Predicted fixed ms of a frame that traces anything (charged once against T); 0 until
+        measured (an engine that does not measure it has it in the per-ray costs)."""
+        return self._trace_overhead.value if self._trace_overhead.observations else 0.0
+
     def ms_per_ray(self) -> dict[str, float]:
         return {effect: estimate.value for effect, estimate in self._ms_per_ray.items()}
 
@@ -246,6 +259,7 @@ class CostModel:
         state.update({f"{effect}_ms_per_ray": value for effect, value in self.ms_per_ray().items()})
         state["paper_ms_per_cost"] = self._paper_ms_per_cost.value
         state["measured_residual"] = self._residual.value
+        state["trace_overhead_ms"] = self.trace_overhead_ms()
         return state
 
     def predict_element_ms(self, elements, cost: np.ndarray, cost_mode: str) -> np.ndarray:
@@ -305,6 +319,12 @@ class CostModel:
             if measured is not None:
                 self._stage_ms[stage].update(measured)
         trace_ms = _finite_positive(stats.trace_ms)
+        overhead = _finite_positive(stats.trace_overhead_ms) if stats.trace_overhead_ms is not None else None
+        if trace_ms is not None and stats.trace_overhead_ms is not None:
+            overhead = min(overhead or 0.0, trace_ms)
+            self._trace_overhead.update(overhead)
+            # What is left is the effects' (per-ray) time.
+            trace_ms = _finite_positive(trace_ms - overhead)
         effect_rays = np.array([_finite_positive(stats.effect_rays.get(effect, 0)) or 0.0 for effect in EFFECTS])
         effect_ms = np.array([_finite_positive(stats.effect_ms.get(effect, 0)) or 0.0 for effect in EFFECTS])
         element_rays = None

@@ -190,6 +190,9 @@ class FrameRenderer:
             raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
             composite_ms=None if shade_setup_ms > 0 else composite_ms,
             trace_ms=max(trace_ms - counters.upload_ms, 0.0) if np.any(selected) else None,
+            # The layers' read-back, the scene update, the uploads of the results: no effect's.
+            trace_overhead_ms=max(trace_ms - counters.upload_ms - counters.shadow_ms - counters.reflection_ms
+                                  - counters.refraction_ms, 0.0) if np.any(selected) and may_trace else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,

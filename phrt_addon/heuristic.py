@@ -319,7 +319,12 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     if settings.mode == "HYBRID":
         nodes = np.flatnonzero(eligible)
         graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes], settings.order)
-        node_selected, node_phase, predicted_trace = graph.select(time_left, settings.n_parallel)
+        # Tracing anything costs a fixed part first (reading the layers back, the moving objects'
+        # BVH, the pixels' tiles): the elements share what is left of T after it.
+        overhead = model.trace_overhead_ms() if time_left_ms is None and element_ms is None else 0.0
+        node_selected, node_phase, predicted_trace = graph.select(max(time_left - overhead, 0.0), settings.n_parallel)
+        if np.any(node_selected):
+            predicted_trace += overhead
         selected[nodes] = node_selected
         phase[nodes] = node_phase
         trace_order = nodes[graph.relevance_order[node_selected[graph.relevance_order]]]
@@ -328,6 +333,8 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         phase[selected] = 1
         trace_order = np.flatnonzero(selected)[np.lexsort((np.flatnonzero(selected), -terms.relevance[selected]))]
         predicted_trace = float(np.sum(predicted_ms[selected]))
+        if np.any(selected) and time_left_ms is None and element_ms is None:
+            predicted_trace += model.trace_overhead_ms()
     else:
         predicted_trace = 0.0
 

@@ -250,6 +250,28 @@ def test_per_effect_cost_per_ray_is_learned_with_overhead_shared():
     assert model.ms_per_ray()["refractions"] == MS_PER_RAY_PRIOR["refractions"]
 
 
+def test_the_fixed_cost_of_tracing_is_learned_apart_from_the_rays_and_charged_once():
+    """Reading the layers back and updating the scene cost the same whatever is traced: measured
+    apart (trace_overhead_ms), they stay out of the cost per ray, and a selection is charged them
+    once, so an element fits only if it fits beside them."""
+    model = CostModel()
+    assert model.trace_overhead_ms() == 0.0  # never measured: not charged
+    for rays in (10000, 50000, 20000, 10000, 30000, 40000):
+        model.observe(FrameStats(raster_ms=20.0, select_ms=1.0, composite_ms=5.0, trace_ms=30.0 + rays * 1e-3,
+                                 effect_ms={"reflections": rays * 1e-3}, effect_rays={"reflections": rays},
+                                 trace_overhead_ms=30.0))
+    assert model.trace_overhead_ms() == pytest.approx(30.0)
+    assert model.ms_per_ray()["reflections"] == pytest.approx(1e-3)
+    # T = 100 - 26 = 74 ms; the element costs 1000 px * 2 rays * 1e-3 * Q: 2 ms * Q.
+    settings = heuristic.SelectionSettings(budget_ms=100.0)
+    fits = heuristic.select(_one_element_frame(rt_cost=np.array([20.0])), None, settings, model)  # 40 ms
+    assert fits.selected[0] and fits.predicted_trace_ms == pytest.approx(70.0)
+    too_much = heuristic.select(_one_element_frame(rt_cost=np.array([25.0])), None, settings, model)  # 50 ms
+    assert not too_much.selected[0] and too_much.predicted_trace_ms == 0.0
+    assert too_much.time_left_ms == pytest.approx(74.0)  # T itself is the paper's
+    assert model.state()["trace_overhead_ms"] == pytest.approx(30.0)
+
+
 def test_element_rays_teach_the_element_its_own_rays_per_pixel():
     elements = _one_element_frame()
     model = CostModel()
