@@ -184,6 +184,14 @@ class FrameStats:
     trace_overhead_ms: float | None = None
 
 
+def _finite_non_negative(value) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) and value >= 0 else None
+
+
 def _finite_positive(value) -> float | None:
     try:
         value = float(value)
@@ -319,9 +327,9 @@ class CostModel:
             if measured is not None:
                 self._stage_ms[stage].update(measured)
         trace_ms = _finite_positive(stats.trace_ms)
-        overhead = _finite_positive(stats.trace_overhead_ms) if stats.trace_overhead_ms is not None else None
-        if trace_ms is not None and stats.trace_overhead_ms is not None:
-            overhead = min(overhead or 0.0, trace_ms)
+        overhead = _finite_non_negative(stats.trace_overhead_ms)
+        if trace_ms is not None and overhead is not None:
+            overhead = min(overhead, trace_ms)
             self._trace_overhead.update(overhead)
             # What is left is the effects' (per-ray) time.
             trace_ms = _finite_positive(trace_ms - overhead)

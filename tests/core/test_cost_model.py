@@ -270,6 +270,10 @@ def test_the_fixed_cost_of_tracing_is_learned_apart_from_the_rays_and_charged_on
     assert not too_much.selected[0] and too_much.predicted_trace_ms == 0.0
     assert too_much.time_left_ms == pytest.approx(74.0)  # T itself is the paper's
     assert model.state()["trace_overhead_ms"] == pytest.approx(30.0)
+    for garbage in (float("nan"), -5.0, float("inf"), "x"):  # ignored, the rest of the frame still learned
+        model.observe(FrameStats(trace_ms=40.0, effect_ms={"reflections": 10.0}, effect_rays={"reflections": 1e4},
+                                 trace_overhead_ms=garbage))
+    assert model.trace_overhead_ms() == pytest.approx(30.0)
 
 
 def test_element_rays_teach_the_element_its_own_rays_per_pixel():
