@@ -162,38 +162,41 @@ class RadianceTracer:
         next_depth = depth + np.where(total_internal, TIR_BOUNCE_COST, 1.0)
         reflected = np.broadcast_to(self.world, (len(idx), 3)).copy()
         trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02)
-        if np.any(trace_reflection):
-            r = np.flatnonzero(trace_reflection)
-            direction = leave_surface(shading.reflect(dirs[r], facing[r]), geometric_facing[r])
-            start = points[r] + geometric_facing[r] * eps[r, None]
-            traced = self.radiance(start, direction, next_depth[r], passed[r])
-            reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
-        color += reflect_weight * reflected
         refracts = transmits & ~total_internal
         tint = np.where(entering[:, None], surface.albedo, 1.0)
         trace_refraction = can_bounce & refracts
-        if np.any(trace_refraction):
-            t = np.flatnonzero(trace_refraction)
-            direction, _ = shading.refract(dirs[t], facing[t], eta[t])
-            direction = leave_surface(direction, geometric_facing[t], side=-1.0)
-            start = points[t] - geometric_facing[t] * eps[t, None]
-            through = self.radiance(start, direction, next_depth[t], passed[t])
-            weight = (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint[t]
-            color[t] += weight * through
         # Straight on, unbent: the 1 - alpha part of the surface, and the transmitted part of a
         # transmissive surface out of bounces (the raster's blended transparency).
         alpha = m.alpha[material][:, None]
         straight_weight = (1.0 - alpha) + alpha * np.where(
             (refracts & ~can_bounce)[:, None], (transmissive * (1.0 - fresnel_t))[:, None] * tint, 0.0)
-        color *= alpha
         straight = np.flatnonzero(straight_weight.max(axis=1) > 0)
+        more = passed[straight] < MAX_PASS_THROUGH
+
+        # Every secondary ray of this batch (reflected, refracted, passing straight on) is traced
+        # in one call: one Embree query and one hit shading per bounce level, not per branch.
+        r = np.flatnonzero(trace_reflection)
+        t = np.flatnonzero(trace_refraction)
+        s = straight[more]
+        reflect_direction = leave_surface(shading.reflect(dirs[r], facing[r]), geometric_facing[r])
+        refract_direction, _ = shading.refract(dirs[t], facing[t], eta[t])
+        refract_direction = leave_surface(refract_direction, geometric_facing[t], side=-1.0)
+        secondary = self.radiance(
+            np.concatenate([points[r] + geometric_facing[r] * eps[r, None],
+                            points[t] - geometric_facing[t] * eps[t, None],
+                            points[s] - geometric_facing[s] * eps[s, None]]),
+            np.concatenate([reflect_direction, refract_direction, dirs[s]]),
+            np.concatenate([next_depth[r], next_depth[t], depth[s]]),
+            np.concatenate([passed[r], passed[t], passed[s] + 1]))
+        traced, through, passing = np.split(secondary, [len(r), len(r) + len(t)])
+
+        reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
+        color += reflect_weight * reflected
+        color[t] += (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint[t] * through
+        color *= alpha
         if len(straight):
             behind = np.broadcast_to(self.world, (len(straight), 3)).copy()
-            more = passed[straight] < MAX_PASS_THROUGH
-            if np.any(more):
-                s = straight[more]
-                start = points[s] - geometric_facing[s] * eps[s, None]
-                behind[more] = self.radiance(start, dirs[s], depth[s], passed[s] + 1)
+            behind[more] = passing
             color[straight] += straight_weight[straight] * behind
         result[idx] = shading.finite(color)
         return result
