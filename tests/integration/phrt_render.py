@@ -20,6 +20,20 @@ from exr_passes import read_passes
 MODES = ("RASTER", "HYBRID", "RAYTRACE")
 
 
+def save_moving_showcase(path: Path, width: int, height: int) -> Path:
+    """The showcase scene with its camera moving 1 unit along x over frames 1-3, saved to
+    ``path`` (a path to replay and sweep); the session is left with an empty file."""
+    from phrt.sample_scenes.showcase import build_showcase
+    scene = build_showcase(width, height)
+    camera = scene.camera
+    camera.keyframe_insert("location", frame=1)
+    camera.location.x -= 1.0
+    camera.keyframe_insert("location", frame=3)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    return path
+
+
 def assert_finite_logs():
     """No NaN or Inf in the last frame's statistics or selection rows."""
     frame = final.last_frame()

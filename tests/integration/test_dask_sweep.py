@@ -33,7 +33,7 @@ import phrt  # noqa: E402
 from phrt.engine import sweep as sweep_engine  # noqa: E402
 from phrt.phrt_addon import plan as plan_module  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
-from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
+from phrt_render import save_moving_showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
 RESOLUTION = [64, 48]
@@ -43,15 +43,7 @@ RESOLUTION = [64, 48]
 def blend(tmp_path_factory):
     if not hasattr(bpy.types.Scene, "phrt"):
         phrt.register()
-    folder = tmp_path_factory.mktemp("dask")
-    scene = build_showcase(*RESOLUTION)
-    camera = scene.camera
-    camera.keyframe_insert("location", frame=1)
-    camera.location.x -= 1.0
-    camera.keyframe_insert("location", frame=3)
-    bpy.ops.wm.save_as_mainfile(filepath=str(folder / "showcase.blend"))
-    bpy.ops.wm.read_homefile(use_empty=True)
-    return folder / "showcase.blend"
+    return save_moving_showcase(tmp_path_factory.mktemp("dask") / "showcase.blend", *RESOLUTION)
 
 
 @pytest.fixture(scope="module")

@@ -21,6 +21,7 @@ from phrt import compat  # noqa: E402
 from phrt.engine import extract, final  # noqa: E402
 from phrt.phrt_addon import metrics, shading  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
+from phrt_render import box_hit, erode, plane_hit  # noqa: E402
 
 MODES = ("RASTER", "HYBRID", "RAYTRACE")
 
@@ -94,29 +95,6 @@ def sphere_hit(origins, directions, centre, radius):
     disc = b * b - c
     t = -b - np.sqrt(np.maximum(disc, 0.0))
     return np.where((disc > 0) & (t > 0), t, np.inf)
-
-
-def box_hit(origins, directions, low, high):
-    """Distance to the entry point of an axis-aligned box along rays (inf on a miss)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t0 = (np.asarray(low, float) - origins) / directions
-        t1 = (np.asarray(high, float) - origins) / directions
-    near = np.max(np.nan_to_num(np.minimum(t0, t1), nan=-np.inf), axis=-1)
-    far = np.min(np.nan_to_num(np.maximum(t0, t1), nan=np.inf), axis=-1)
-    return np.where((far >= np.maximum(near, 0.0)) & (far > 0), np.maximum(near, 0.0), np.inf)
-
-
-def plane_hit(origins, directions, height):
-    """Distance to z = height along rays (inf when parallel or behind)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (height - origins[..., 2]) / directions[..., 2]
-    return np.where(np.isfinite(t) & (t > 0), t, np.inf)
-
-
-def erode(mask):
-    """Pixels whose 4 neighbours are in ``mask`` too (image borders count as outside)."""
-    padded = np.pad(mask, 1)
-    return mask & padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:]
 
 
 def red_dominant(rgb):

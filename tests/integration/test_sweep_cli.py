@@ -22,7 +22,7 @@ import pytest  # noqa: E402
 import phrt  # noqa: E402
 from phrt.phrt_addon import plan as plan_module  # noqa: E402
 from phrt.phrt_addon import runlog  # noqa: E402
-from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
+from phrt_render import save_moving_showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
 SWEEP = ["--frames", "1-3", "--budgets", "1", "--resolution", "64x48", "--oracle-every", "2"]
@@ -38,15 +38,7 @@ def run_phrt(args, cwd):
 def blend(tmp_path_factory):
     if not hasattr(bpy.types.Scene, "phrt"):
         phrt.register()
-    folder = tmp_path_factory.mktemp("sweep")
-    scene = build_showcase(64, 48)
-    camera = scene.camera
-    camera.keyframe_insert("location", frame=1)
-    camera.location.x -= 1.0
-    camera.keyframe_insert("location", frame=3)
-    bpy.ops.wm.save_as_mainfile(filepath=str(folder / "showcase.blend"))
-    bpy.ops.wm.read_homefile(use_empty=True)
-    return folder / "showcase.blend"
+    return save_moving_showcase(tmp_path_factory.mktemp("sweep") / "showcase.blend", 64, 48)
 
 
 @pytest.fixture(scope="module")
