@@ -5,8 +5,9 @@ GPU objects created in one ``render()`` are valid in later ones (docs/platform-n
 while it stays valid:
 
 - shaders: created on first use, kept for the process;
-- meshes: a vertex buffer and one index buffer / batch per (material, element)
-  group, keyed by the mesh's content (``MeshInstance.geometry_key``): a moved object
+- meshes: a vertex buffer (corners with the same vertex, normal and texture
+  coordinate share a vertex) and per (material, element) group a batch per spatial
+  chunk with its bounding box, culled against each frame's view (``draw_chunks``); keyed by the mesh's content (``MeshInstance.geometry_key``): a moved object
   keeps its batches (its transform is a push constant), an edited mesh gets new ones
   and its old ones are dropped at the end of the frame (``retain_meshes``);
 - material textures, keyed by image and size; the material table (a small float
@@ -31,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..phrt_addon import rules
+from ..phrt_addon import draw_chunks, rules
 from . import shaders
 
 def gpu_module():
@@ -52,7 +53,7 @@ class ShadowAtlas:
 class GPUResources:
     def __init__(self):
         self._shaders = {}
-        self._meshes = {}  # geometry key -> (vertex buffer, [(material, element, batch)])
+        self._meshes = {}  # geometry key -> mesh_batches()
         self._textures = {}  # texture key -> GPUTexture
         self._material_table = (None, None)  # (content key, GPUTexture)
         self._shadows = {}  # shadow key -> ShadowAtlas
@@ -166,29 +167,42 @@ class GPUResources:
 
     # -- meshes --------------------------------------------------------------
     def mesh_batches(self, mesh):
-        """(vertex buffer, [(material, element, batch)]) of a mesh, uploaded on first use."""
+        """(vertex buffer, [(material, element, [batch per chunk], (chunks, 2, 3) local boxes)],
+        all the chunks' boxes in that order) of a mesh, uploaded on first use: vertices shared between corners, each (material,
+        element) group cut into spatial chunks that a frame culls against its view
+        (``draw_chunks``)."""
         entry = self._meshes.get(mesh.geometry_key)
         if entry is None:
             gpu = gpu_module()
             corners = mesh.triangles.reshape(-1)
             uvs = rules.texture_coordinates(mesh.corner_uvs, len(corners))
+            vertex_of_corner, first_corner = draw_chunks.shared_vertices(corners, mesh.corner_normals, uvs)
             fmt = gpu.types.GPUVertFormat()
             fmt.attr_add(id="pos", comp_type="F32", len=3, fetch_mode="FLOAT")
             fmt.attr_add(id="nor", comp_type="F32", len=3, fetch_mode="FLOAT")
             fmt.attr_add(id="uv", comp_type="F32", len=2, fetch_mode="FLOAT")
-            vbo = gpu.types.GPUVertBuf(fmt, len(corners))
-            vbo.attr_fill("pos", np.ascontiguousarray(mesh.positions[corners], dtype=np.float32))
-            vbo.attr_fill("nor", np.ascontiguousarray(mesh.corner_normals, dtype=np.float32))
-            vbo.attr_fill("uv", np.ascontiguousarray(uvs, dtype=np.float32))
+            vbo = gpu.types.GPUVertBuf(fmt, len(first_corner))
+            vbo.attr_fill("pos", np.ascontiguousarray(mesh.positions[corners[first_corner]], dtype=np.float32))
+            vbo.attr_fill("nor", np.ascontiguousarray(mesh.corner_normals[first_corner], dtype=np.float32))
+            vbo.attr_fill("uv", np.ascontiguousarray(uvs[first_corner], dtype=np.float32))
+            corner_vertices = vertex_of_corner.reshape(-1, 3)
             groups = []
             for material, element, triangles in mesh.material_groups():
-                indices = np.ascontiguousarray((triangles[:, None] * 3 + np.arange(3)[None, :]).astype(np.int32))
-                ibo = gpu.types.GPUIndexBuf(type="TRIS", seq=indices)
-                groups.append((int(material), int(element), gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo)))
-            entry = self._meshes[mesh.geometry_key] = (vbo, groups)
+                batches, boxes = [], []
+                for part, box in draw_chunks.chunks(mesh.positions, mesh.triangles, triangles):
+                    ibo = gpu.types.GPUIndexBuf(type="TRIS", seq=np.ascontiguousarray(corner_vertices[part], np.int32))
+                    batches.append(gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo))
+                    boxes.append(box)
+                groups.append((int(material), int(element), batches, np.asarray(boxes, np.float64)))
+            boxes = np.concatenate([group[3] for group in groups]) if groups else np.zeros((0, 2, 3))
+            entry = self._meshes[mesh.geometry_key] = (vbo, groups, boxes)
             self.created["mesh"] += 1
             self.uploads += 1
         return entry
+
+    def mesh_boxes(self, mesh):
+        """(chunks, 2, 3) local boxes of all the mesh's chunks, in drawing order (its groups')."""
+        return self.mesh_batches(mesh)[2]
 
     def retain_meshes(self, keys):
         """Drop the batches of meshes no longer drawn (an edited mesh's old content)."""

@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from ..phrt_addon import rules, shading
+from ..phrt_addon import draw_chunks, rules, shading
 from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
 from ..phrt_addon.scene import SceneSnapshot
 from ..phrt_addon.shadowmap import ShadowMap, light_views
@@ -135,7 +135,8 @@ class GPUFrame:
             if mesh.n_triangles == 0:
                 continue
             keys.add(mesh.geometry_key)
-            self._draw_list.append((mesh, self.resources.mesh_batches(mesh)[1]))
+            groups = self.resources.mesh_batches(mesh)[1]
+            self._draw_list.append((mesh, groups, self.resources.mesh_boxes(mesh)))
         self.resources.retain_meshes(keys)
         textures = {}
         for index, material in enumerate(self.snapshot.materials):
@@ -238,7 +239,7 @@ class GPUFrame:
         transparent = np.array([m.is_transparent for m in self.snapshot.materials], dtype=bool)
         shader = self._shaders["gbuffer"]
         white = self.resources.placeholder(1.0)
-        has_transparent = any(transparent[material] for _, groups in self._draw_list for material, _, _ in groups)
+        has_transparent = any(transparent[material] for _, groups, _ in self._draw_list for material, *_ in groups)
         for layer in ("opaque", "transparent"):
             framebuffer = gpu.types.GPUFrameBuffer(
                 depth_slot=targets["opaque_depth"],
@@ -264,10 +265,19 @@ class GPUFrame:
         self._transparent_drawn = has_transparent
 
     def _draw_groups(self, shader, origin, wanted, white):
-        for mesh, groups in self._draw_list:
-            shader.uniform_float("model", _matrix_list(_model_relative(mesh.matrix_world, origin)))
-            for material_index, element_index, batch in groups:
+        view_proj = self._view_proj()
+        for mesh, groups, boxes in self._draw_list:
+            model = _model_relative(mesh.matrix_world, origin)
+            # Chunks wholly outside the view are not drawn (draw_chunks); one test per mesh.
+            visible = iter(~draw_chunks.boxes_outside(view_proj @ model, boxes))
+            shader.uniform_float("model", _matrix_list(model))
+            for material_index, element_index, batches, _ in groups:
+                drawn = [batch for batch, keep in zip(batches, visible) if keep]
                 if not wanted(material_index):
+                    continue
+                self.stats["chunks_drawn"] = self.stats.get("chunks_drawn", 0) + len(drawn)
+                self.stats["chunks_culled"] = self.stats.get("chunks_culled", 0) + len(batches) - len(drawn)
+                if not drawn:
                     continue
                 texture = self._material_textures.get(material_index)
                 shader.uniform_float("base_color", (*self.materials.base_color[material_index], 1.0))
@@ -276,7 +286,8 @@ class GPUFrame:
                                                 1.0 if texture is not None else 0.0, 0.0))
                 shader.uniform_int("ids", (int(material_index), int(element_index)))
                 shader.uniform_sampler("base_tex", texture if texture is not None else white)
-                batch.draw(shader)
+                for batch in drawn:
+                    batch.draw(shader)
 
     def _fullscreen(self, gpu, name, framebuffer, bind, write_depth=False, depth_test="NONE"):
         """One full-screen pass; ``write_depth``: the shader's gl_FragDepth is kept; ``depth_test``:
@@ -376,11 +387,12 @@ class GPUFrame:
                 ubo = _ubo(gpu, np.r_[np.asarray(_matrix_list(view.view_proj_relative), np.float32),
                                       view.view[2, :3].astype(np.float32), np.float32(0.0)])
                 shader.uniform_block("frame", ubo)
-                for mesh, groups in self._draw_list:
+                for mesh, groups, _ in self._draw_list:
                     shader.uniform_float("model", _matrix_list(_model_relative(mesh.matrix_world, view.origin)))
-                    for material_index, _, batch in groups:
+                    for material_index, _, batches, _ in groups:
                         if rules.casts_shadow(self.snapshot.materials[material_index]):
-                            batch.draw(shader)
+                            for batch in batches:
+                                batch.draw(shader)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)
         gpu.state.viewport_set(0, 0, self.width, self.height)

@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 bpy = pytest.importorskip("bpy")
+import bmesh  # noqa: E402
 
 from phrt.engine import extract, final, raster, session  # noqa: E402
 from phrt.phrt_addon import lighting  # noqa: E402
@@ -334,3 +335,40 @@ def test_what_stands_for_untraced_terms_has_the_traced_textures_size_and_format(
     assert standins["no_radiance"] == reflection == ("RGBA32F", WIDTH, HEIGHT)
     assert np.all(values["no_visibility"] == -1.0)
     assert np.all(values["no_radiance"] == 0.0)
+
+
+def test_chunks_outside_the_view_are_not_drawn_and_the_frame_is_the_same():
+    """Culling changes what is drawn, never what is seen: a floor of many chunks that reaches
+    far outside the view and objects behind the camera give the same G-buffer and image as
+    drawing everything; vertices shared between corners give the corners' own attributes."""
+    scene = lit_scene()
+    tiles = showcase.principled("Tiles", color=(0.3, 0.5, 0.7), roughness=0.4)
+    showcase.mesh_object("BigFloor", lambda bm: bmesh.ops.create_grid(bm, x_segments=120, y_segments=120, size=30.0),
+                         tiles, location=(0.0, 0.0, -0.01))
+    showcase.mesh_object("Behind", showcase.sphere(1.0), tiles, location=(9.0, -11.0, 4.0), smooth=True)
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        results = []
+        for cull in (True, False):
+            original = raster.draw_chunks.boxes_outside
+            if not cull:
+                raster.draw_chunks.boxes_outside = lambda matrix, boxes: np.zeros(len(boxes), bool)
+            try:
+                frame = raster.GPUFrame(snapshot)
+                frame.draw()
+                gbuffer = frame.gbuffer()
+                image = frame.shade(None)
+            finally:
+                raster.draw_chunks.boxes_outside = original
+            results.append((dict(frame.stats), gbuffer, image))
+        return results
+
+    (culled_stats, culled, culled_image), (all_stats, everything, all_image) = run_on_gpu(scene, job)
+    assert all_stats["chunks_culled"] == 0
+    assert culled_stats["chunks_culled"] >= 3  # chunks of the big floor and the sphere behind
+    assert culled_stats["chunks_drawn"] + culled_stats["chunks_culled"] == all_stats["chunks_drawn"]
+    for name in ("position", "normal", "element", "material"):
+        assert np.array_equal(getattr(culled.opaque, name), getattr(everything.opaque, name), equal_nan=True), name
+    assert np.array_equal(culled_image, all_image)
+    assert culled.opaque.covered.mean() > 0.6  # the big floor fills the view's lower part
