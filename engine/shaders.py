@@ -217,26 +217,48 @@ int cube_face(vec3 p) {
   return (x_major ? 0 : (y_major ? 2 : 4)) + (along < 0.0 ? 1 : 0);
 }
 
+/* A point relative to a cube map's centre in the view of the face that sees it: (right, up,
+   forward) coordinates, the face's view being a signed permutation of the axes
+   (shadowmap.cube_face_view, tested against the faces' matrices): selects, no indexing. */
+vec3 cube_face_view(vec3 p) {
+  vec3 a = abs(p);
+  bool x_major = a.x >= a.y && a.x >= a.z;
+  bool y_major = !x_major && a.y >= a.z;
+  float along = x_major ? p.x : (y_major ? p.y : p.z);
+  float s = along < 0.0 ? -1.0 : 1.0;
+  return x_major ? vec3(-s * p.y, p.z, s * p.x) : (y_major ? vec3(s * p.x, p.z, s * p.y) : vec3(-s * p.x, p.y, s * p.z));
+}
+
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
-   on linear light-space depth, one gather).  Cube maps: the face is chosen from the offset point. */
+   on linear light-space depth, one gather).  Cube maps: the face is chosen from the offset
+   point.  Only view 0's matrix is read (a uniform index): llvmpipe fetches a matrix indexed by
+   a per-pixel face lane by lane, which cost a fifth of the lighting pass. */
 float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
   int faces = int(lights.light[i].shadow_offset.w + 0.5);
+  bool cube = faces == 6;
+  mat4 view0 = lights.light[i].face_view_proj[0];
+  vec3 axis0 = lights.light[i].face_axis[0].xyz;
   vec3 rel = position + lights.light[i].shadow_offset.xyz;
-  int face = faces == 6 ? cube_face(rel) : 0;
   float texel_angle = lights.light[i].shadow_params.x;
   float near = lights.light[i].shadow_params.y;
   bool ortho = lights.light[i].shadow_params.z > 0.5;
   int size = int(lights.light[i].shadow_params.w + 0.5);
-  float axis_depth = -dot(rel, lights.light[i].face_axis[face].xyz);
+  /* Depth along the view axis: a cube face's axis is the point's major axis. */
+  vec3 a = abs(rel);
+  float axis_depth = cube ? max(a.x, max(a.y, a.z)) : -dot(rel, axis0);
   float texel = ortho ? texel_angle : texel_angle * max(axis_depth, near);
   vec3 p = rel + normal * (NORMAL_OFFSET_TEXELS * texel);
-  face = faces == 6 ? cube_face(p) : face;
-  vec4 clip = lights.light[i].face_view_proj[face] * vec4(p, 1.0);
+  /* A cube face's clip coordinates from view 0's projection terms (every face has the same). */
+  vec3 face_view = cube_face_view(p);
+  vec4 clip = cube ? vec4(-view0[1][0] * face_view.x, view0[2][1] * face_view.y,
+                          view0[0][2] * face_view.z + view0[3][2], face_view.z)
+                   : view0 * vec4(p, 1.0);
+  int face = cube ? cube_face(p) : 0;
   bool in_front = clip.w > 1e-12;
   vec3 ndc = clip.xyz / (in_front ? clip.w : 1.0);
   /* No map, behind the view or outside it: lit. */
   bool inside = faces != 0 && in_front && !(abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z > 1.0);
-  float threshold = -dot(p, lights.light[i].face_axis[face].xyz) - DEPTH_BIAS_TEXELS * texel;
+  float threshold = (cube ? face_view.z : -dot(p, axis0)) - DEPTH_BIAS_TEXELS * texel;
   vec2 uv = (ndc.xy * 0.5 + 0.5) * float(size) - 0.5;
   vec2 origin = floor(uv);
   vec2 f = uv - origin;

@@ -101,6 +101,25 @@ def orthographic(left, right, bottom, top, near, far) -> np.ndarray:
 CUBE_FACES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 
 
+def cube_face_view(points) -> tuple[np.ndarray, np.ndarray]:
+    """(face index into CUBE_FACES, (N, 3) view coordinates (right, up, forward)) of points
+    relative to a cube map's centre: each face's view (``look_at`` of its axis) is a signed
+    permutation of the axes, so the GLSL lookup (``engine/shaders.py``, ``cube_face_view``)
+    computes it with selects instead of reading a matrix per pixel.  Ties go to x, then y
+    (as the GLSL)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    a = np.abs(p)
+    x_major = (a[:, 0] >= a[:, 1]) & (a[:, 0] >= a[:, 2])
+    y_major = ~x_major & (a[:, 1] >= a[:, 2])
+    along = np.where(x_major, p[:, 0], np.where(y_major, p[:, 1], p[:, 2]))
+    sign = np.where(along < 0.0, -1.0, 1.0)
+    face = np.where(x_major, 0, np.where(y_major, 2, 4)) + (along < 0.0)
+    view = np.where(x_major[:, None], np.stack([-sign * p[:, 1], p[:, 2], sign * p[:, 0]], 1),
+                    np.where(y_major[:, None], np.stack([sign * p[:, 0], p[:, 2], sign * p[:, 1]], 1),
+                             np.stack([-sign * p[:, 0], p[:, 1], sign * p[:, 2]], 1)))
+    return face.astype(np.int64), view
+
+
 def _corners(bounds):
     low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
     return np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])

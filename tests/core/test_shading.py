@@ -271,3 +271,30 @@ def test_normalize_leaves_zero_vectors_finite():
     result = shading.normalize(np.zeros((2, 3)))
     assert np.all(np.isfinite(result))
     assert np.all(np.isfinite(shading.normalize(np.zeros(3))))
+
+
+def test_cube_face_views_are_the_signed_axis_permutations_the_glsl_lookup_computes():
+    """The GLSL shadow lookup reads no per-face matrix: it computes a cube face's view from the
+    point (shadowmap.cube_face_view); that must be each face's look_at view exactly."""
+    from phrt.phrt_addon import shadowmap
+    from phrt.phrt_addon.scene import Light
+    light = Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.5, -1.0, 2.0))
+    views = shadowmap.light_views(light, ((-5.0, -5.0, -1.0), (5.0, 5.0, 4.0)), 256)
+    assert [tuple(-v.view[2, :3]) for v in views] == [tuple(map(float, f)) for f in shadowmap.CUBE_FACES]
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(5000, 3)) * rng.uniform(0.01, 100.0, size=(5000, 1))
+    face, view = shadowmap.cube_face_view(points)
+    assert set(face.tolist()) == set(range(6))
+    for index, light_view in enumerate(views):
+        mine = face == index
+        expected = points[mine] @ light_view.view[:3, :3].T * np.array([1.0, 1.0, -1.0])
+        assert np.array_equal(view[mine], expected)
+        # The face seen is the one whose projection holds the point, with depth the forward axis.
+        clip = np.c_[points[mine], np.ones(mine.sum())] @ light_view.view_proj_relative.T
+        assert np.all(np.abs(clip[:, :2]) <= clip[:, 3:4] * (1 + 1e-12))
+        np.testing.assert_allclose(clip[:, 3], view[mine][:, 2], rtol=1e-12)
+        # The GLSL's clip coordinates from view 0's projection terms (engine/shaders.py).
+        first = views[0].view_proj_relative
+        np.testing.assert_allclose(-first[0, 1] * view[mine][:, 0], clip[:, 0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(first[1, 2] * view[mine][:, 1], clip[:, 1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(first[2, 0] * view[mine][:, 2] + first[2, 3], clip[:, 2], rtol=1e-12)
