@@ -6,6 +6,7 @@ message, instead of a silently black image.
 """
 import bpy
 
+from ..phrt_addon import blas_threads
 from ..phrt_addon.schema import PASSES
 from . import final, session
 
@@ -29,7 +30,9 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         try:
             if self.final is None:
                 self.final = final.FinalRender(self)
-            self.final.render(depsgraph)
+            # numpy's BLAS threads would spin on the cores the GPU driver renders with.
+            with blas_threads.limited(1):
+                self.final.render(depsgraph)
         except Exception as error:  # reported to the caller, never swallowed
             message = f"PHRT: {error}"
             final.log_exception(error)
@@ -42,7 +45,8 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportRender()
-            self.viewport.update(depsgraph)
+            with blas_threads.limited(1):
+                self.viewport.update(depsgraph)
         except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
             final.log_exception(error)
             self.update_stats("PHRT", f"Error: {error}")
@@ -53,7 +57,8 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportRender()
-            self.viewport.draw(self, context, depsgraph)
+            with blas_threads.limited(1):
+                self.viewport.draw(self, context, depsgraph)
         except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
             final.log_exception(error)
             self.update_stats("PHRT", f"Error: {error}")

@@ -18,6 +18,7 @@ import traceback
 
 import numpy as np
 
+from ..phrt_addon import blas_threads
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.problems import ProblemLog
 from ..phrt_addon.schema import PASS_FIELDS
@@ -46,11 +47,18 @@ class ReplaySession:
 
     def __enter__(self):
         session.current().replay = self
+        # numpy's BLAS on one thread for the whole replay: its idle threads spin between frames
+        # too, on the cores the GPU driver and Embree render with (phrt_addon/blas_threads.py).
+        self._blas = blas_threads.limited(1)
+        self._blas.__enter__()
         return self
 
     def __exit__(self, *exc):
         engine_session = session.current()
         engine_session.replay = None
+        blas, self._blas = getattr(self, "_blas", None), None
+        if blas is not None:
+            blas.__exit__(None, None, None)
         self.renderer.close()
         # End of the replay: its GPU resources (meshes, shadow maps, targets) are dropped here.
         engine_session.resources.release(keep_shaders=True)
