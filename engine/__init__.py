@@ -6,7 +6,6 @@ message, instead of a silently black image.
 """
 import bpy
 
-from ..phrt_addon import blas_threads
 from ..phrt_addon.schema import PASSES
 from . import final, session
 
@@ -31,7 +30,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
             if self.final is None:
                 self.final = final.FinalRender(self)
             # numpy's BLAS threads would spin on the cores the GPU driver renders with.
-            with blas_threads.limited(1):
+            with self.session.blas.limited(1):
                 self.final.render(depsgraph)
         except Exception as error:  # reported to the caller, never swallowed
             message = f"PHRT: {error}"
@@ -45,7 +44,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportRender()
-            with blas_threads.limited(1):
+            with self.session.blas.limited(1):
                 self.viewport.update(depsgraph)
         except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
             final.log_exception(error)
@@ -57,7 +56,7 @@ class PHRTRenderEngine(bpy.types.RenderEngine):
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportRender()
-            with blas_threads.limited(1):
+            with self.session.blas.limited(1):
                 self.viewport.draw(self, context, depsgraph)
         except Exception as error:  # shown in the viewport, never raised into Blender's draw loop
             final.log_exception(error)

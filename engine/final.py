@@ -18,7 +18,6 @@ import traceback
 
 import numpy as np
 
-from ..phrt_addon import blas_threads
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.problems import ProblemLog
 from ..phrt_addon.schema import PASS_FIELDS
@@ -49,7 +48,7 @@ class ReplaySession:
         session.current().replay = self
         # numpy's BLAS on one thread for the whole replay: its idle threads spin between frames
         # too, on the cores the GPU driver and Embree render with (phrt_addon/blas_threads.py).
-        self._blas = blas_threads.limited(1)
+        self._blas = session.current().blas.limited(1)
         self._blas.__enter__()
         return self
 

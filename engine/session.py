@@ -12,6 +12,7 @@ and every engine instance holds it as ``self.session``:
 - ``replay``: the active ``final.ReplaySession`` (None outside a replay);
 - ``last_frame``: the last frame's decisions, statistics and problems, which the N panel,
   the viewport overlay and ``phrt.export_selection_log`` read through ``last_frame()``;
+- ``blas``: numpy's OpenBLAS, held to one thread while PHRT renders (``blas_threads``);
 - the UI's bookkeeping: the candidate list's (``refreshing_candidates``, ``pending_refresh``) and the
   viewport overlay's draw handler (``overlay_handle``).
 
@@ -24,6 +25,7 @@ import atexit
 import queue
 from dataclasses import dataclass, field
 
+from ..phrt_addon.blas_threads import BlasThreads
 from ..phrt_addon.cache import BoundedCache
 from .gpu_resources import GPUResources
 
@@ -59,6 +61,7 @@ class EngineSession:
         self.refreshing_candidates = False  # the candidate list is being rebuilt: ignore its update callbacks
         self.pending_refresh = queue.SimpleQueue()  # scenes whose candidate list waits for the main thread
         self.overlay_handle = None  # the viewport overlay's draw handler (engine/viewport.py)
+        self.blas = BlasThreads()  # numpy's BLAS, held to one thread while PHRT renders
 
     def renderer_for(self, scene_name: str):
         """The ``FrameRenderer`` of this frame: the replay's, else the scene's own."""

@@ -8,7 +8,7 @@ frame's p95 fell from 114-121 ms to 88-92 ms with one BLAS thread (mean 83-91 ->
 ms), and a 4x4 ``np.linalg.inv`` inside a frame took 1.3 ms instead of 5 us.  PHRT's own
 products are (N, 3) @ (3, 3): memory-bound, no faster on two threads.
 
-``limited(1)`` sets the thread count of every OpenBLAS numpy loaded (found among the
+``BlasThreads().limited(1)`` sets the thread count of every OpenBLAS numpy loaded (found among the
 process's shared libraries, as threadpoolctl does) and restores what it found on exit, so
 other add-ons in the same Blender keep theirs.  Without OpenBLAS (Accelerate on macOS, an
 MKL build) it changes nothing.  Plain Python (ctypes); no ``bpy``.
@@ -24,9 +24,6 @@ import sys
 # "64_"; numpy 2's scipy-openblas adds a prefix).
 _PREFIXES = ("openblas", "scipy_openblas")
 _SUFFIXES = ("", "64_")
-
-_controls: list | None = None
-
 
 def _loaded_libraries() -> list[str]:
     """Paths of the shared libraries loaded in this process whose name mentions BLAS."""
@@ -66,8 +63,39 @@ def _loaded_libraries() -> list[str]:
     return sorted(path for path in paths if "blas" in os.path.basename(path).lower())
 
 
+class BlasThreads:
+    """The OpenBLAS libraries numpy loaded, found once (the engine session keeps one)."""
+
+    def __init__(self):
+        self._controls = None
+
+    def controls(self) -> list:
+        """[(get, set)] of every OpenBLAS loaded (numpy imported first)."""
+        if self._controls is None:
+            self._controls = _find_controls()
+        return self._controls
+
+    def thread_counts(self) -> list[int]:
+        """The thread count of each OpenBLAS found (empty: none)."""
+        return [get() for get, _ in self.controls()]
+
+    @contextlib.contextmanager
+    def limited(self, threads: int = 1):
+        """Every OpenBLAS found runs at most ``threads`` threads inside the block; each gets
+        back the count it had after it."""
+        found = [(get(), set_) for get, set_ in self.controls()]
+        for count, set_ in found:
+            if count > threads:
+                set_(int(threads))
+        try:
+            yield
+        finally:
+            for count, set_ in found:
+                if count > threads:
+                    set_(count)
+
+
 def _find_controls() -> list:
-    """[(get, set)] of every OpenBLAS loaded (numpy imported first)."""
     import numpy  # noqa: F401  (loads the BLAS numpy links)
     controls = []
     for path in _loaded_libraries():
@@ -88,30 +116,3 @@ def _find_controls() -> list:
                 continue
             break
     return controls
-
-
-def controls() -> list:
-    global _controls
-    if _controls is None:
-        _controls = _find_controls()
-    return _controls
-
-
-def thread_counts() -> list[int]:
-    """The thread count of each OpenBLAS found (empty: none)."""
-    return [get() for get, _ in controls()]
-
-
-@contextlib.contextmanager
-def limited(threads: int = 1):
-    """Every OpenBLAS found runs at most ``threads`` threads inside the block."""
-    found = [(get(), set_) for get, set_ in controls()]
-    for count, set_ in found:
-        if count > threads:
-            set_(int(threads))
-    try:
-        yield
-    finally:
-        for count, set_ in found:
-            if count > threads:
-                set_(count)

@@ -130,25 +130,29 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     (0, 0) and depth inf.  This is the exact "area in the view plane" of the paper's
     A, measured rather than estimated from bounds."""
     height, width = element_image.shape
-    flat = element_image.ravel()
-    # Every pixel counted in one pass: no element (or an id beyond the list) goes to bin n.
-    ids = np.where((flat >= 0) & (flat < n_elements), flat, n_elements)
+    # Every pixel counted once; no element (or an id beyond the list) goes to bin n.
+    image = np.asarray(element_image)
+    ids = np.where((image >= 0) & (image < n_elements), image, n_elements).astype(np.intp, copy=False)
     size = n_elements + 1
-    counts = np.bincount(ids, minlength=size)[:n_elements].astype(np.int64)
+    # Pixels per (row, element) and per (column, element): integer bincounts, no weights.
+    per_row = np.bincount((ids + np.arange(height)[:, None] * size).ravel(), minlength=height * size)
+    per_row = per_row.reshape(height, size)[:, :n_elements]
+    per_column = np.bincount((ids + np.arange(width)[None, :] * size).ravel(), minlength=width * size)
+    per_column = per_column.reshape(width, size)[:, :n_elements]
+    counts = per_row.sum(axis=0).astype(np.int64)
     safe = np.maximum(counts, 1)
     has_pixels = counts > 0
     # Mean pixel column and row, then to NDC (affine: the mean of the NDC is the NDC of the mean).
-    columns = np.tile(np.arange(width, dtype=np.float64), height)
-    rows = np.repeat(np.arange(height, dtype=np.float64), width)
-    mean_x = np.bincount(ids, weights=columns, minlength=size)[:n_elements] / safe
-    mean_y = np.bincount(ids, weights=rows, minlength=size)[:n_elements] / safe
+    mean_x = (np.arange(width, dtype=np.float64) @ per_column) / safe
+    mean_y = (np.arange(height, dtype=np.float64) @ per_row) / safe
     centre = np.zeros((n_elements, 2))
     centre[has_pixels, 0] = ((mean_x + 0.5) / width * 2.0 - 1.0)[has_pixels]
     centre[has_pixels, 1] = ((mean_y + 0.5) / height * 2.0 - 1.0)[has_pixels]
     # Mean depth (bincount) rather than the median: O(n) and stable for convex-ish elements.
-    depth_values = np.asarray(view_depth, dtype=np.float64).ravel()
+    flat = ids.ravel()
+    depth_values = np.asarray(view_depth).ravel()
     finite = np.isfinite(depth_values)
-    depth_sum = np.bincount(ids, weights=np.where(finite, depth_values, 0.0), minlength=size)[:n_elements]
-    depth_count = np.bincount(ids, weights=finite, minlength=size)[:n_elements]
+    depth_sum = np.bincount(flat, weights=np.where(finite, depth_values, 0.0), minlength=size)[:n_elements]
+    depth_count = np.bincount(flat[finite], minlength=size)[:n_elements]
     depth = np.where(depth_count > 0, depth_sum / np.maximum(depth_count, 1), np.inf)
     return counts, centre, depth

@@ -377,22 +377,22 @@ def test_chunks_outside_the_view_are_not_drawn_and_the_frame_is_the_same():
 def test_numpys_blas_runs_one_thread_while_phrt_renders_and_gets_its_threads_back():
     """OpenBLAS's idle threads spin on the cores the GPU driver renders with: a frame (F12 or a
     replay's) runs with one BLAS thread; Blender's other users of numpy get theirs back after."""
-    from phrt.phrt_addon import blas_threads
+    blas = session.current().blas
     scene = showcase.build_showcase(WIDTH, HEIGHT)
-    before = blas_threads.thread_counts()
+    before = blas.thread_counts()
     seen = []
-    with final.ReplaySession(on_frame=lambda result, snapshot: seen.append(blas_threads.thread_counts())):
+    with final.ReplaySession(on_frame=lambda result, snapshot: seen.append(blas.thread_counts())):
         bpy.ops.render.render()
         bpy.ops.render.render()
-        assert blas_threads.thread_counts() == [1] * len(before)  # between a replay's frames too
+        assert blas.thread_counts() == [1] * len(before)  # between a replay's frames too
     assert seen == [[1] * len(before)] * 2
-    assert blas_threads.thread_counts() == before
+    assert blas.thread_counts() == before
     # An F12 render outside any replay: the engine's render() holds the limit itself.
     write = final.FinalRender._write
-    final.FinalRender._write = lambda self, *args: (seen.append(blas_threads.thread_counts()), write(self, *args))
+    final.FinalRender._write = lambda self, *args: (seen.append(blas.thread_counts()), write(self, *args))
     try:
         bpy.ops.render.render()
     finally:
         final.FinalRender._write = write
     assert seen[-1] == [1] * len(before) and len(seen) == 3
-    assert blas_threads.thread_counts() == before
+    assert blas.thread_counts() == before
