@@ -229,13 +229,13 @@ class FrameRenderer:
         depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, np.float32(1e10)).astype(np.float32,
                                                                                                     copy=False)
         if combined is not None:  # None: the image stayed on the GPU (the viewport draws it there)
-            combined = shading.finite_rgba(combined)
+            combined = shading.finite_rgba(combined, copy=False)  # the read-back is this frame's own
         element = index.astype(np.float32) + np.float32(1.0)
         element[index == n] = 0.0
         return FramePasses(
             combined=combined,
             depth=depth,
-            normal=np.nan_to_num(np.asarray(raster.front_normal, np.float32)),
+            normal=_finite(np.asarray(raster.front_normal, np.float32)),
             selected=selected_flags[index],
             candidate=candidate_flags[index],
             element=element,
@@ -292,6 +292,11 @@ def front_points(camera, view_depth, step) -> np.ndarray:
                                                      far_depth - near_depth, 1.0)
     points = near + (far - near) * along[:, None]
     return points[np.all(np.isfinite(points), axis=1)]
+
+
+def _finite(array: np.ndarray) -> np.ndarray:
+    """``array`` itself when every value is finite (one reduction), else a finite copy."""
+    return array if np.isfinite(array).all() else np.nan_to_num(array)
 
 
 def _rays_per_pixel(snapshot, area_px, footprint):
