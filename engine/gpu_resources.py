@@ -123,6 +123,7 @@ class GPUResources:
             gpu = gpu_module()
             builders = {
                 "gbuffer": lambda: shaders.build_gbuffer(gpu),
+                "gbuffer_untextured": lambda: shaders.build_gbuffer(gpu, textured=False),
                 "shadow": lambda: shaders.build_shadow(gpu),
                 "resolve": lambda: shaders.build_resolve(gpu),
                 "composite": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),

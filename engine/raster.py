@@ -116,8 +116,8 @@ class GPUFrame:
         start = time.perf_counter()
         created_before = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
         setup_start = time.perf_counter()
-        self._shaders = {name: self.resources.shader(name) for name in ("gbuffer", "resolve", "composite",
-                                                                        "composite_opaque", "shadow")}
+        self._shaders = {name: self.resources.shader(name) for name in (
+            "gbuffer", "gbuffer_untextured", "resolve", "composite", "composite_opaque", "shadow")}
         counts = self._light_counts()
         for count in set(counts):
             self._shaders[f"lighting{count}"] = self.resources.shader(f"lighting{count}")
@@ -235,11 +235,18 @@ class GPUFrame:
     def _draw_gbuffer(self, gpu):
         targets = self.targets
         origin = self.snapshot.camera.position
-        ubo = _ubo(gpu, np.r_[np.asarray(_matrix_list(self._view_proj()), np.float32), np.zeros(4, np.float32)])
+        view_proj = self._view_proj()
+        ubo = _ubo(gpu, np.r_[np.asarray(_matrix_list(view_proj), np.float32), np.zeros(4, np.float32)])
         transparent = np.array([m.is_transparent for m in self.snapshot.materials], dtype=bool)
-        shader = self._shaders["gbuffer"]
-        white = self.resources.placeholder(1.0)
+        textured = np.zeros(len(self.snapshot.materials), bool)
+        textured[list(self._material_textures)] = True
         has_transparent = any(transparent[material] for _, groups, _ in self._draw_list for material, *_ in groups)
+        # Chunks wholly outside the view are not drawn (draw_chunks): one test per mesh and frame.
+        visible = []
+        for mesh, _, boxes in self._draw_list:
+            model = _model_relative(mesh.matrix_world, origin)
+            visible.append((model, ~draw_chunks.boxes_outside(view_proj @ model, boxes)))
+        drawn = culled = 0
         for layer in ("opaque", "transparent"):
             framebuffer = gpu.types.GPUFrameBuffer(
                 depth_slot=targets["opaque_depth"],
@@ -256,38 +263,52 @@ class GPUFrame:
                     gpu.state.depth_mask_set(True)
                     gpu.state.face_culling_set("NONE")
                     gpu.state.blend_set("NONE")
-                    shader.bind()
-                    shader.uniform_block("frame", ubo)
-                    wanted = (lambda m: not transparent[m]) if layer == "opaque" else (lambda m: bool(transparent[m]))
-                    self._draw_groups(shader, origin, wanted, white)
+                    in_layer = ~transparent if layer == "opaque" else transparent
+                    # Materials without an image first, with the variant that samples none.
+                    for name, wanted in (("gbuffer_untextured", in_layer & ~textured),
+                                         ("gbuffer", in_layer & textured)):
+                        if not any(wanted[material] for _, groups, _ in self._draw_list
+                                   for material, *_ in groups):
+                            continue
+                        shader = self._shaders[name]
+                        shader.bind()
+                        shader.uniform_block("frame", ubo)
+                        counts = self._draw_groups(shader, visible, wanted)
+                        drawn, culled = drawn + counts[0], culled + counts[1]
                     gpu.state.depth_test_set("NONE")
                     gpu.state.depth_mask_set(False)
+        self.stats["chunks_drawn"], self.stats["chunks_culled"] = drawn, culled
         self._transparent_drawn = has_transparent
 
-    def _draw_groups(self, shader, origin, wanted, white):
-        view_proj = self._view_proj()
-        for mesh, groups, boxes in self._draw_list:
-            model = _model_relative(mesh.matrix_world, origin)
-            # Chunks wholly outside the view are not drawn (draw_chunks); one test per mesh.
-            visible = iter(~draw_chunks.boxes_outside(view_proj @ model, boxes))
-            shader.uniform_float("model", _matrix_list(model))
+    def _draw_groups(self, shader, visible, wanted):
+        """Draw the visible chunks of the groups whose material is ``wanted``; returns
+        (chunks drawn, chunks culled)."""
+        drawn = culled = 0
+        for (mesh, groups, _), (model, keep) in zip(self._draw_list, visible):
+            chunk = 0
+            model_set = False
             for material_index, element_index, batches, _ in groups:
-                drawn = [batch for batch, keep in zip(batches, visible) if keep]
-                if not wanted(material_index):
+                first, chunk = chunk, chunk + len(batches)
+                if not wanted[material_index]:
                     continue
-                self.stats["chunks_drawn"] = self.stats.get("chunks_drawn", 0) + len(drawn)
-                self.stats["chunks_culled"] = self.stats.get("chunks_culled", 0) + len(batches) - len(drawn)
-                if not drawn:
+                shown = [batch for batch, show in zip(batches, keep[first:chunk]) if show]
+                drawn, culled = drawn + len(shown), culled + len(batches) - len(shown)
+                if not shown:
                     continue
+                if not model_set:
+                    shader.uniform_float("model", _matrix_list(model))
+                    model_set = True
                 texture = self._material_textures.get(material_index)
                 shader.uniform_float("base_color", (*self.materials.base_color[material_index], 1.0))
                 shader.uniform_float("params", (float(self.materials.roughness[material_index]),
                                                 float(self.materials.metallic[material_index]),
                                                 1.0 if texture is not None else 0.0, 0.0))
                 shader.uniform_int("ids", (int(material_index), int(element_index)))
-                shader.uniform_sampler("base_tex", texture if texture is not None else white)
-                for batch in drawn:
+                if texture is not None:
+                    shader.uniform_sampler("base_tex", texture)
+                for batch in shown:
                     batch.draw(shader)
+        return drawn, culled
 
     def _fullscreen(self, gpu, name, framebuffer, bind, write_depth=False, depth_test="NONE"):
         """One full-screen pass; ``write_depth``: the shader's gl_FragDepth is kept; ``depth_test``:

@@ -50,8 +50,12 @@ void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) { n = -n; }
   vec4 albedo = base_color;
-  /* Sampled exactly as the tracer samples (rules.sample_texture: bilinear, wrapping). */
-  if (params.z > 0.5) { albedo *= phrt_sample_texture(base_tex, v_uv); }
+  /* Sampled exactly as the tracer samples (rules.sample_texture: bilinear, wrapping).  A
+     variant per case, not a branch: llvmpipe runs a branch's body for every fragment, and the
+     sampling was 15% of arcade's G-buffer pass where most materials have no texture. */
+#if WITH_TEXTURE
+  albedo *= phrt_sample_texture(base_tex, v_uv);
+#endif
   albedo = clamp(albedo, 0.0, 1.0);
   out_position = vec4(v_position, float(ids.x + 1));
   out_normal = vec4(n, params.x);
@@ -456,15 +460,19 @@ def _layer_samplers(info, first_slot, with_albedo=True, with_element=False, laye
     return slot
 
 
-def build_gbuffer(gpu):
+def build_gbuffer(gpu, textured=True):
+    """The G-buffer pass; ``textured``: the base colour is multiplied by ``base_tex`` (the
+    variant for materials with an image; the other reads no texture)."""
     info = gpu.types.GPUShaderCreateInfo()
+    info.define("WITH_TEXTURE", "1" if textured else "0")
     info.typedef_source(FRAME_STRUCT)
     info.uniform_buf(0, "FrameData", "frame")
     info.push_constant("MAT4", "model")
     info.push_constant("VEC4", "base_color")
     info.push_constant("VEC4", "params")  # roughness, metallic, has_texture, unused
     info.push_constant("IVEC2", "ids")  # material index, element index (-1: none)
-    info.sampler(0, "FLOAT_2D", "base_tex")
+    if textured:
+        info.sampler(0, "FLOAT_2D", "base_tex")
     interface = gpu.types.GPUStageInterfaceInfo("phrt_gbuffer_iface")
     interface.smooth("VEC3", "v_position")
     interface.smooth("VEC3", "v_normal")
