@@ -130,13 +130,12 @@ class GPUResources:
                 "composite_opaque": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS,
                                                                     with_transparent=False),
             }
-            # "lighting<n>": n lights added per pass (the variants a frame's light count needs)
-            builders.update({f"lighting{n}": (lambda n=n: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS,
-                                                                                 DEPTH_BIAS_TEXELS, n))
-                             for n in range(1, shaders.LIGHTS_PER_PASS + 1)})
-            builders.update({f"lighting{n}_composite": (lambda n=n: shaders.build_lighting(
-                gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS, n, with_composite=True))
-                for n in range(1, shaders.LIGHTS_PER_PASS + 1)})
+            # "lighting<n>[_composite]_<slots>": n lights added per pass (shaders.lighting_name)
+            lighting = shaders.parse_lighting_name(name)
+            if lighting is not None:
+                slots, composite = lighting
+                builders[name] = lambda: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS, slots,
+                                                                with_composite=composite)
             shader = self._shaders[name] = builders[name]()
             self.created["shader"] += 1
         return shader

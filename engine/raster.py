@@ -119,14 +119,10 @@ class GPUFrame:
         self._shaders = {name: self.resources.shader(name) for name in (
             "gbuffer", "gbuffer_untextured", "resolve", "composite", "composite_opaque", "shadow")}
         counts = self._light_counts()
-        for count in set(counts):
-            self._shaders[f"lighting{count}"] = self.resources.shader(f"lighting{count}")
         # All lights in one pass: that pass also composites the opaque layer (one full-screen
         # pass less), if the implementation has the sampler it needs.
         self._fused = len(counts) == 1 and (shaders.lighting_samplers(counts[0], with_composite=True)
                                             <= self.resources.max_fragment_samplers())
-        if self._fused:
-            self._shaders[f"lighting{counts[0]}_composite"] = self.resources.shader(f"lighting{counts[0]}_composite")
         self.targets = self.resources.targets(self.width, self.height)
         self.material_table = self.resources.material_table(self.materials)
         self._draw_list = []
@@ -147,6 +143,13 @@ class GPUFrame:
         created_after = self.resources.uploads + sum(self.resources.created[kind] for kind in ("shader", "target"))
         setup_ms = _ms(setup_start) if created_after > created_before else 0.0
         setup_ms += self._ensure_shadow_maps(gpu)
+        # The lighting variants need the shadow maps' kinds (cube or single view per light slot).
+        created_before = self.resources.created["shader"]
+        setup_start = time.perf_counter()
+        for name in self._lighting_shader_names():
+            self._shaders[name] = self.resources.shader(name)
+        if self.resources.created["shader"] > created_before:
+            setup_ms += _ms(setup_start)
         self._draw_gbuffer(gpu)
         self.resources.frames_drawn += 1
         self._resolve(gpu)
@@ -188,6 +191,28 @@ class GPUFrame:
             result.append(stored)
         return tuple(result)
 
+    def _light_slots(self) -> list:
+        """Per lighting pass, (kind code, map code) of each light: map 0 none, 1 one view, 2
+        cube map (what the pass's shader variant computes, shaders.lighting_name)."""
+        per_pass, lights = shaders.LIGHTS_PER_PASS, self.snapshot.lights
+        slots = []
+        for index, light in enumerate(lights):
+            if index % per_pass == 0:
+                slots.append([])
+            atlas = self.atlases.get(index) if light.cast_shadows else None
+            shadow = 0 if atlas is None else (2 if len(atlas.views) == 6 else 1)
+            slots[-1].append((shaders.LIGHT_KIND_CODES.get(light.kind, 1), shadow))
+        return slots
+
+    def _lighting_shader_names(self) -> list:
+        """The lighting shader of each pass (shaders.lighting_name), and the opaque layer's
+        variant that also composites when there is one pass (``_fused``)."""
+        slots = self._light_slots()
+        names = [shaders.lighting_name(per_pass) for per_pass in slots]
+        if self._fused:
+            names.append(shaders.lighting_name(slots[0], composite=True))
+        return names
+
     def _light_counts(self) -> list:
         """Lights per lighting pass (LIGHTS_PER_PASS, the rest in the last)."""
         per_pass, lights = shaders.LIGHTS_PER_PASS, len(self.snapshot.lights)
@@ -204,7 +229,7 @@ class GPUFrame:
         self._measure = bool(measure_change)
         # A driver compiles a shader for each pipeline state on its first draw (llvmpipe JITs the
         # fragment code then): the first frame of a configuration pays it once, as set-up.
-        configuration = (tuple(self._light_counts()), self._fused, self._transparent_drawn, self._measure)
+        configuration = (tuple(self._lighting_shader_names()), self._transparent_drawn, self._measure)
         first_use = self.resources.first_use("shade", configuration)
         self._traced_flags = (float("opaque" in uploads["reflection"]), float("transparent" in uploads["reflection"]),
                               float(uploads["refraction"] is not None))
@@ -533,12 +558,12 @@ class GPUFrame:
         no_visibility, empty = targets["no_visibility"], targets["no_radiance"]
         per_pass = shaders.LIGHTS_PER_PASS
         groups = []  # (shader, its batch, the lights' UBO, light indices) per pass
-        for first in range(0, len(lights), per_pass):
+        for first, name in zip(range(0, len(lights), per_pass), self._lighting_shader_names()):
             indices = range(first, min(first + per_pass, len(lights)))
             values = np.zeros((per_pass, LIGHT_UBO_FLOATS), np.float32)
             for slot, index in enumerate(indices):
                 values[slot] = self._light_ubo(gpu, index, lights[index])
-            shader = self._shaders[f"lighting{len(indices)}"]
+            shader = self._shaders[name]
             # Referenced until drawn: a dropped UBO reads as zeros.
             groups.append((shader, self.resources.fullscreen_batch(shader), _ubo(gpu, values.ravel()), indices))
         try:
@@ -553,7 +578,7 @@ class GPUFrame:
                         if fused and layer == "opaque":
                             # The one pass of the opaque layer writes Combined too: not blended.
                             gpu.state.blend_set("NONE")
-                            shader = self._shaders[f"lighting{len(indices)}_composite"]
+                            shader = self._shaders[self._lighting_shader_names()[-1]]
                             batch = self.resources.fullscreen_batch(shader)
                         shader.bind()
                         shader.uniform_block("camera", camera_ubo)

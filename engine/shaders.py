@@ -21,6 +21,8 @@ G-buffer layout (one texture set per layer, opaque and transparent):
 """
 from __future__ import annotations
 
+import re
+
 from ..phrt_addon import rules
 
 # Materials are stored in a float texture, MATERIAL_TABLE_WIDTH per row pair:
@@ -234,12 +236,11 @@ vec3 cube_face_view(vec3 p) {
 }
 
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
-   on linear light-space depth, one gather).  Cube maps: the face is chosen from the offset
-   point.  Only view 0's matrix is read (a uniform index): llvmpipe fetches a matrix indexed by
+   on linear light-space depth, one gather).  ``cube`` (a constant of the variant): a cube
+   map, whose face is chosen from the offset point.  Only view 0's matrix is read (a uniform index): llvmpipe fetches a matrix indexed by
    a per-pixel face lane by lane, which cost a fifth of the lighting pass. */
-float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
+float shadow_lit(int i, bool cube, sampler2D shadow_map, vec3 position, vec3 normal) {
   int faces = int(lights.light[i].shadow_offset.w + 0.5);
-  bool cube = faces == 6;
   mat4 view0 = lights.light[i].face_view_proj[0];
   vec3 axis0 = lights.light[i].face_axis[0].xyz;
   vec3 rel = position + lights.light[i].shadow_offset.xyz;
@@ -279,8 +280,7 @@ float shadow_lit(int i, sampler2D shadow_map, vec3 position, vec3 normal) {
 }
 
 /* shading.light_incidence: direction to the light and irradiance before shadows and cosine. */
-vec3 incidence(int i, vec3 position, out vec3 direction) {
-  int kind = int(lights.light[i].color_kind.w + 0.5);
+vec3 incidence(int i, int kind, vec3 position, out vec3 direction) {
   vec3 color = lights.light[i].color_kind.rgb;
   vec3 axis = lights.light[i].direction.xyz;
   vec3 to_light = lights.light[i].position_radius.xyz - position;
@@ -300,12 +300,13 @@ vec3 incidence(int i, vec3 position, out vec3 direction) {
 
 /* One light at one layer's surface; with ``measure_change`` where the tracer replaced the
    shadow map, ``change`` gains the luminance of what that changed (the error-aware relevance). */
-vec3 light_layer(int i, sampler2D shadow_map, Surface s, float traced_visibility, inout float change) {
+vec3 light_layer(int i, int kind, int map, sampler2D shadow_map, Surface s, float traced_visibility,
+                 inout float change) {
   vec3 direction;
-  vec3 irradiance = incidence(i, s.position, direction);
+  vec3 irradiance = incidence(i, kind, s.position, direction);
   vec3 unshadowed = brdf_cosine(s, direction) * irradiance;
   /* The shadow map's lit fraction (1 for a light without one), or the tracer's where it ran. */
-  float mapped = shadow_lit(i, shadow_map, s.position, s.normal);
+  float mapped = map == 0 ? 1.0 : shadow_lit(i, map == 2, shadow_map, s.position, s.normal);
   bool traced = lights.light[i].spot.z > 0.5 && traced_visibility >= 0.0;
   change += measure_change != 0 && traced
             ? min(dot(abs(unshadowed * (traced_visibility - mapped)), PHRT_LUMINANCE), 1.0) : 0.0;
@@ -539,10 +540,39 @@ def lighting_samplers(light_count: int, with_composite: bool = False) -> int:
     return 4 + 2 * int(light_count) + int(bool(with_composite))
 
 
-def build_lighting(gpu, normal_offset_texels, depth_bias_texels, light_count=LIGHTS_PER_PASS, with_composite=False):
-    """``light_count`` lights over one G-buffer layer (bound as ``layer_*``), added to its light
-    target; ``with_composite``: also the opaque layer's composite (all its lights in this one
-    pass), written to Combined (and the traced change when measured)."""
+# A lighting variant has the kind and the shadow map of each light slot compiled in: llvmpipe
+# runs both sides of every select, and computing every kind's and map's terms for every light
+# cost a fifth of arcade's light passes.  Per slot two letters: the kind, then the map.
+KIND_LETTERS = {0: "s", 1: "p", 2: "t", 3: "a"}  # LIGHT_KIND_CODES: sun, point, spot (t), area
+MAP_LETTERS = {0: "n", 1: "v", 2: "c"}  # no map, one view, cube map
+
+
+def lighting_name(slots, composite: bool = False) -> str:
+    """The name of a lighting variant for ``slots`` [(kind code, map code)] (map: 0 none, 1 one
+    view, 2 cube), ``composite``: the opaque layer's pass that also composites."""
+    letters = "".join(KIND_LETTERS[int(kind)] + MAP_LETTERS[int(shadow)] for kind, shadow in slots)
+    return f"lighting{len(slots)}{'_composite' if composite else ''}_{letters}"
+
+
+def parse_lighting_name(name: str):
+    """(slots, composite) of a ``lighting_name``, or None."""
+    match = re.fullmatch(r"lighting(\d+)(_composite)?_((?:[spta][nvc])+)", name)
+    if match is None or int(match.group(1)) != len(match.group(3)) // 2 \
+            or not 1 <= int(match.group(1)) <= LIGHTS_PER_PASS:
+        return None
+    kinds = {letter: code for code, letter in KIND_LETTERS.items()}
+    maps = {letter: code for code, letter in MAP_LETTERS.items()}
+    letters = match.group(3)
+    slots = [(kinds[letters[j]], maps[letters[j + 1]]) for j in range(0, len(letters), 2)]
+    return slots, match.group(2) is not None
+
+
+def build_lighting(gpu, normal_offset_texels, depth_bias_texels, slots, with_composite=False):
+    """``slots`` [(kind code, map code)] lights over one G-buffer layer (bound as ``layer_*``),
+    added to its light target (see ``lighting_name``); ``with_composite``: also the opaque
+    layer's composite (all its lights in this one pass), written to Combined (and the traced
+    change when measured)."""
+    light_count = len(slots)
     info = gpu.types.GPUShaderCreateInfo()
     info.define("LIGHTS_PER_PASS", str(LIGHTS_PER_PASS))
     info.define("WITH_COMPOSITE", "1" if with_composite else "0")
@@ -569,7 +599,8 @@ def build_lighting(gpu, normal_offset_texels, depth_bias_texels, light_count=LIG
         info.fragment_out(index, "VEC4", name)
     info.vertex_source(FULLSCREEN_VERT)
     info.fragment_source(COMMON_LIB + LIGHTING_FRAG.replace("PHRT_ADD_LIGHTS\n", "".join(
-        f"  total += light_layer({i}, shadow_map{i}, s, (traced_lights & {1 << i}) != 0 "
+        f"  total += light_layer({i}, {int(slots[i][0])}, {int(slots[i][1])}, shadow_map{i}, s, "
+        f"(traced_lights & {1 << i}) != 0 "
         f"? texelFetch(visibility{i}, pixel, 0).r : -1.0, change);\n" for i in range(light_count))))
     return gpu.shader.create_from_info(info)
 

@@ -396,3 +396,35 @@ def test_numpys_blas_runs_one_thread_while_phrt_renders_and_gets_its_threads_bac
         final.FinalRender._write = write
     assert seen[-1] == [1] * len(before) and len(seen) == 3
     assert blas.thread_counts() == before
+
+
+def test_each_lighting_pass_compiles_in_its_lights_kinds_and_shadow_maps():
+    """A lighting variant computes only the kind and the shadow lookup of each light it holds
+    (llvmpipe runs both sides of every select): sun one view, point and area cube maps, spot
+    one view, a light without shadows no lookup at all."""
+    scene = lit_scene()
+    bpy.data.objects["Bulb"].data.use_shadow = False
+
+    def job(engine, depsgraph):
+        frame = raster.GPUFrame(extract.extract(depsgraph))
+        frame.draw()
+        kinds = {light.name: light.kind for light in frame.snapshot.lights}
+        return frame._lighting_shader_names(), [light.name for light in frame.snapshot.lights], kinds
+
+    names, order, kinds = run_on_gpu(scene, job)
+    expected = {"Sun": "sv", "Lamp": "pc", "Spot": "tv", "Panel": "ac", "Bulb": "pn"}
+    letters = "".join(expected[name] for name in order)
+    assert names == [f"lighting5_{letters}", f"lighting5_composite_{letters}"]
+    slots, composite = raster.shaders.parse_lighting_name(names[1])
+    assert composite and raster.shaders.lighting_name(slots, composite=True) == names[1]
+    assert raster.shaders.parse_lighting_name("lighting2_svpc") is not None
+    for bad in ("lighting3_svpc", "lighting0_", "lighting7_" + "sv" * 7, "lighting1_xv", "lighting1_sv_x"):
+        assert raster.shaders.parse_lighting_name(bad) is None, bad
+
+
+def test_a_light_without_shadows_lights_as_the_reference_does():
+    scene = lit_scene()
+    bpy.data.objects["Bulb"].data.use_shadow = False
+    bpy.data.objects["Spot"].data.use_shadow = False
+    gpu_image, reference, gbuffer = gpu_and_reference(scene)
+    assert_parity(gpu_image, reference, gbuffer)
