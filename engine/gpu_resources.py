@@ -7,7 +7,8 @@ while it stays valid:
 - shaders: created on first use, kept for the process;
 - meshes: a vertex buffer (corners with the same vertex, normal and texture
   coordinate share a vertex) and per (material, element) group a batch per spatial
-  chunk with its bounding box, culled against each frame's view (``draw_chunks``); keyed by the mesh's content (``MeshInstance.geometry_key``): a moved object
+  chunk with its bounding box, culled against each frame's view (``draw_chunks``);
+  keyed by the mesh's content (``MeshInstance.geometry_key``): a moved object
   keeps its batches (its transform is a push constant), an edited mesh gets new ones
   and its old ones are dropped at the end of the frame (``retain_meshes``);
 - material textures, keyed by image and size; the material table (a small float
@@ -168,9 +169,9 @@ class GPUResources:
     # -- meshes --------------------------------------------------------------
     def mesh_batches(self, mesh):
         """(vertex buffer, [(material, element, [batch per chunk], (chunks, 2, 3) local boxes)],
-        all the chunks' boxes in that order) of a mesh, uploaded on first use: vertices shared between corners, each (material,
-        element) group cut into spatial chunks that a frame culls against its view
-        (``draw_chunks``)."""
+        all the chunks' boxes in that order) of a mesh, uploaded on first use: vertices
+        shared between corners, each (material, element) group cut into spatial chunks that
+        a frame culls against its view (``draw_chunks``)."""
         entry = self._meshes.get(mesh.geometry_key)
         if entry is None:
             gpu = gpu_module()

@@ -237,8 +237,8 @@ vec3 cube_face_view(vec3 p) {
 
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
    on linear light-space depth, one gather).  ``cube`` (a constant of the variant): a cube
-   map, whose face is chosen from the offset point.  Only view 0's matrix is read (a uniform index): llvmpipe fetches a matrix indexed by
-   a per-pixel face lane by lane, which cost a fifth of the lighting pass. */
+   map, whose face is chosen from the offset point.  Only view 0's matrix is read (a uniform
+   index): llvmpipe fetches a matrix indexed by a per-pixel face lane by lane. */
 float shadow_lit(int i, bool cube, sampler2D shadow_map, vec3 position, vec3 normal) {
   int faces = int(lights.light[i].shadow_offset.w + 0.5);
   mat4 view0 = lights.light[i].face_view_proj[0];
