@@ -112,6 +112,14 @@ class _Geometry:
     corner_uvs: np.ndarray  # (T*3,2) float32, finite (rules.texture_coordinates)
     tri_material: np.ndarray
     tri_element: np.ndarray
+    _elements: list | None = None
+
+    def elements(self) -> list:
+        """The elements its triangles belong to (computed once: the static scene keeps its
+        geometries for a whole replay, and a sort of every triangle each frame showed)."""
+        if self._elements is None:
+            self._elements = np.unique(self.tri_element).tolist()
+        return self._elements
 
 
 class _EmbreeSet:
@@ -212,7 +220,7 @@ class TraceScene:
         self.stats["dynamic_triangles"] = sum(m.n_triangles for m in dynamic_meshes)
         # Element -> the set (cluster frame) its triangles are in, as an array indexed by element + 1.
         pairs = [(int(element), set_index) for set_index, embree_set in enumerate(self.sets())
-                 for geometry in embree_set.geometries for element in np.unique(geometry.tri_element).tolist()]
+                 for geometry in embree_set.geometries for element in geometry.elements()]
         lookup = np.full(max([element for element, _ in pairs] + [-1]) + 2, -1, np.int64)
         for element, set_index in reversed(pairs):  # the first set holding the element wins
             lookup[element + 1] = set_index
