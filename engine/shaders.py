@@ -215,23 +215,20 @@ vec3 finite_radiance(vec3 c) {
 LIGHTING_FRAG = """
 /* llvmpipe runs both sides of every branch for every pixel, with mask bookkeeping on top:
    the per-pixel code below chooses with selects rather than branches and early returns. */
-int cube_face(vec3 p) {
-  vec3 a = abs(p);
-  bool x_major = a.x >= a.y && a.x >= a.z;
-  bool y_major = !x_major && a.y >= a.z;
-  float along = x_major ? p.x : (y_major ? p.y : p.z);
-  return (x_major ? 0 : (y_major ? 2 : 4)) + (along < 0.0 ? 1 : 0);
-}
-
 /* A point relative to a cube map's centre in the view of the face that sees it: (right, up,
    forward) coordinates, the face's view being a signed permutation of the axes
-   (shadowmap.cube_face_view, tested against the faces' matrices): selects, no indexing. */
-vec3 cube_face_view(vec3 p) {
+   (shadowmap.cube_face_view, tested against the faces' matrices): selects, no indexing.
+   ``tile``: that face's (column, row) in the atlas (faces +x -x +y -y +z -z in order). */
+vec3 cube_face_view(vec3 p, out vec2 tile) {
   vec3 a = abs(p);
   bool x_major = a.x >= a.y && a.x >= a.z;
   bool y_major = !x_major && a.y >= a.z;
   float along = x_major ? p.x : (y_major ? p.y : p.z);
-  float s = along < 0.0 ? -1.0 : 1.0;
+  bool negative = along < 0.0;
+  float s = negative ? -1.0 : 1.0;
+  float face = (x_major ? 0.0 : (y_major ? 2.0 : 4.0)) + (negative ? 1.0 : 0.0);
+  float columns = float(ATLAS_COLUMNS);
+  tile = vec2(face - columns * floor(face / columns), floor(face / columns));
   return x_major ? vec3(-s * p.y, p.z, s * p.x) : (y_major ? vec3(s * p.x, p.z, s * p.y) : vec3(-s * p.x, p.y, s * p.z));
 }
 
@@ -254,11 +251,11 @@ float shadow_lit(int i, bool cube, sampler2D shadow_map, vec3 position, vec3 nor
   float texel = ortho ? texel_angle : texel_angle * max(axis_depth, near);
   vec3 p = rel + normal * (NORMAL_OFFSET_TEXELS * texel);
   /* A cube face's clip coordinates from view 0's projection terms (every face has the same). */
-  vec3 face_view = cube_face_view(p);
+  vec2 face_tile;
+  vec3 face_view = cube_face_view(p, face_tile);
   vec4 clip = cube ? vec4(-view0[1][0] * face_view.x, view0[2][1] * face_view.y,
                           view0[0][2] * face_view.z + view0[3][2], face_view.z)
                    : view0 * vec4(p, 1.0);
-  int face = cube ? cube_face(p) : 0;
   bool in_front = clip.w > 1e-12;
   vec3 ndc = clip.xyz / (in_front ? clip.w : 1.0);
   /* No map, behind the view or outside it: lit. */
@@ -271,7 +268,7 @@ float shadow_lit(int i, bool cube, sampler2D shadow_map, vec3 position, vec3 nor
   f = mix(f, vec2(0.0), lessThan(origin, vec2(0.0)));
   f = mix(f, vec2(1.0), greaterThan(origin, vec2(float(size - 2))));
   origin = clamp(origin, vec2(0.0), vec2(float(size - 2)));
-  vec2 tile = vec2(float((face % ATLAS_COLUMNS) * size), float((face / ATLAS_COLUMNS) * size));
+  vec2 tile = cube ? face_tile * float(size) : vec2(0.0);
   /* One gather at the corner shared by the 2x2 texels: w = (x0, y0), z = (x1, y0),
      x = (x0, y1), y = (x1, y1). */
   vec4 depth = textureGather(shadow_map, (tile + origin + 1.0) / vec2(textureSize(shadow_map, 0)), 0);
@@ -326,7 +323,7 @@ void main() {
   vec3 total = vec3(0.0);
   /* traced_lights, bit i: the tracer's lit fractions of light i on this layer were uploaded. */
 PHRT_ADD_LIGHTS
-  /* A pixel the layer does not cover gets nothing (selected, not branched: see cube_face). */
+  /* A pixel the layer does not cover gets nothing (selected, not branched: see shadow_lit). */
   out_light = vec4(s.covered ? total : vec3(0.0), 0.0);
   out_change = vec4(0.0, s.covered ? change : 0.0, 0.0, 0.0);
 #if WITH_COMPOSITE
@@ -369,7 +366,7 @@ COMPOSITE_FRAG = """
    full variant then only where the transparent layer covers the pixel (depth-tested against
    its mask; llvmpipe runs a branch's code for every pixel, so the glass is compiled out). */
 vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_traced) {
-  /* Every term is computed and the covered ones chosen by selects (see cube_face). */
+  /* Every term is computed and the covered ones chosen by selects (see shadow_lit). */
   vec4 no_trace = vec4(0.0);
   float transmissive;
   float fresnel_t;
