@@ -88,16 +88,21 @@ def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np
     else:
         position = layer.position.reshape(-1, 3)
         covered = layer.covered.ravel()
-        surface_id = layer.material.ravel().astype(np.int64) * (1 << 32) + layer.element.ravel().astype(np.int64)
+        # The same surface: same material and element (read only at the pixels compared, not
+        # built for the whole frame: a frame with few rays asks for few pixels).
+        material, element = layer.material.ravel(), layer.element.ravel()
+        material_here, element_here = material[flat], element[flat]
         ys, xs = np.divmod(flat, width)
         here = position[flat].astype(np.float64)
+
+        def same_surface(index):
+            return (material[index] == material_here) & (element[index] == element_here)
 
         def difference(step, coordinate, limit):
             forward_index = np.minimum(flat + step, covered.size - 1)
             backward_index = np.maximum(flat - step, 0)
-            forward_ok = (coordinate + 1 < limit) & covered[forward_index] & \
-                (surface_id[forward_index] == surface_id[flat])
-            backward_ok = (coordinate > 0) & covered[backward_index] & (surface_id[backward_index] == surface_id[flat])
+            forward_ok = (coordinate + 1 < limit) & covered[forward_index] & same_surface(forward_index)
+            backward_ok = (coordinate > 0) & covered[backward_index] & same_surface(backward_index)
             forward = position[forward_index].astype(np.float64) - here
             backward = here - position[backward_index].astype(np.float64)
             forward_length = np.where(forward_ok, np.einsum("ij,ij->i", forward, forward), np.inf)
