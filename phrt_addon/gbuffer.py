@@ -139,22 +139,31 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     image = np.asarray(element_image)
     ids = np.where((image >= 0) & (image < n_elements), image, n_elements).astype(np.intp, copy=False)
     size = n_elements + 1
-    # Pixels per (row, element) and per (column, element): integer bincounts, no weights.
-    per_row = np.bincount((ids + np.arange(height)[:, None] * size).ravel(), minlength=height * size)
-    per_row = per_row.reshape(height, size)[:, :n_elements]
-    per_column = np.bincount((ids + np.arange(width)[None, :] * size).ravel(), minlength=width * size)
-    per_column = per_column.reshape(width, size)[:, :n_elements]
-    counts = per_row.sum(axis=0).astype(np.int64)
+    flat = ids.ravel()
+    if (height + width) * size <= 4 * height * width:
+        # Pixels per (row, element) and per (column, element): integer bincounts, no weights.
+        per_row = np.bincount((ids + np.arange(height)[:, None] * size).ravel(), minlength=height * size)
+        per_row = per_row.reshape(height, size)[:, :n_elements]
+        per_column = np.bincount((ids + np.arange(width)[None, :] * size).ravel(), minlength=width * size)
+        per_column = per_column.reshape(width, size)[:, :n_elements]
+        counts = per_row.sum(axis=0).astype(np.int64)
+        column_sum = np.arange(width, dtype=np.float64) @ per_column
+        row_sum = np.arange(height, dtype=np.float64) @ per_row
+    else:  # more elements than such tables should hold: pixel-weighted bincounts
+        counts = np.bincount(flat, minlength=size)[:n_elements].astype(np.int64)
+        column_sum = np.bincount(flat, weights=np.tile(np.arange(width, dtype=np.float64), height),
+                                 minlength=size)[:n_elements]
+        row_sum = np.bincount(flat, weights=np.repeat(np.arange(height, dtype=np.float64), width),
+                              minlength=size)[:n_elements]
     safe = np.maximum(counts, 1)
     has_pixels = counts > 0
     # Mean pixel column and row, then to NDC (affine: the mean of the NDC is the NDC of the mean).
-    mean_x = (np.arange(width, dtype=np.float64) @ per_column) / safe
-    mean_y = (np.arange(height, dtype=np.float64) @ per_row) / safe
+    mean_x = column_sum / safe
+    mean_y = row_sum / safe
     centre = np.zeros((n_elements, 2))
     centre[has_pixels, 0] = ((mean_x + 0.5) / width * 2.0 - 1.0)[has_pixels]
     centre[has_pixels, 1] = ((mean_y + 0.5) / height * 2.0 - 1.0)[has_pixels]
     # Mean depth (bincount) rather than the median: O(n) and stable for convex-ish elements.
-    flat = ids.ravel()
     depth_values = np.asarray(view_depth).ravel()
     finite = np.isfinite(depth_values)
     depth_sum = np.bincount(flat, weights=np.where(finite, depth_values, 0.0), minlength=size)[:n_elements]
