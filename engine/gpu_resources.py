@@ -201,10 +201,6 @@ class GPUResources:
             self.uploads += 1
         return entry
 
-    def mesh_boxes(self, mesh):
-        """(chunks, 2, 3) local boxes of all the mesh's chunks, in drawing order (its groups')."""
-        return self.mesh_batches(mesh)[2]
-
     def retain_meshes(self, keys):
         """Drop the batches of meshes no longer drawn (an edited mesh's old content)."""
         for key in [key for key in self._meshes if key not in keys]:

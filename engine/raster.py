@@ -131,8 +131,8 @@ class GPUFrame:
             if mesh.n_triangles == 0:
                 continue
             keys.add(mesh.geometry_key)
-            groups = self.resources.mesh_batches(mesh)[1]
-            self._draw_list.append((mesh, groups, self.resources.mesh_boxes(mesh)))
+            _, groups, boxes = self.resources.mesh_batches(mesh)
+            self._draw_list.append((mesh, groups, boxes))
         self.resources.retain_meshes(keys)
         textures = {}
         for index, material in enumerate(self.snapshot.materials):
@@ -146,7 +146,8 @@ class GPUFrame:
         # The lighting variants need the shadow maps' kinds (cube or single view per light slot).
         created_before = self.resources.created["shader"]
         setup_start = time.perf_counter()
-        for name in self._lighting_shader_names():
+        self._lighting_names = self._lighting_shader_names()  # once per frame: shade() uses them
+        for name in self._lighting_names:
             self._shaders[name] = self.resources.shader(name)
         if self.resources.created["shader"] > created_before:
             setup_ms += _ms(setup_start)
@@ -229,7 +230,7 @@ class GPUFrame:
         self._measure = bool(measure_change)
         # A driver compiles a shader for each pipeline state on its first draw (llvmpipe JITs the
         # fragment code then): the first frame of a configuration pays it once, as set-up.
-        configuration = (tuple(self._lighting_shader_names()), self._transparent_drawn, self._measure)
+        configuration = (tuple(self._lighting_names), self._transparent_drawn, self._measure)
         first_use = self.resources.first_use("shade", configuration)
         self._traced_flags = (float("opaque" in uploads["reflection"]), float("transparent" in uploads["reflection"]),
                               float(uploads["refraction"] is not None))
@@ -558,7 +559,7 @@ class GPUFrame:
         no_visibility, empty = targets["no_visibility"], targets["no_radiance"]
         per_pass = shaders.LIGHTS_PER_PASS
         groups = []  # (shader, its batch, the lights' UBO, light indices) per pass
-        for first, name in zip(range(0, len(lights), per_pass), self._lighting_shader_names()):
+        for first, name in zip(range(0, len(lights), per_pass), self._lighting_names):
             indices = range(first, min(first + per_pass, len(lights)))
             values = np.zeros((per_pass, LIGHT_UBO_FLOATS), np.float32)
             for slot, index in enumerate(indices):
@@ -578,7 +579,7 @@ class GPUFrame:
                         if fused and layer == "opaque":
                             # The one pass of the opaque layer writes Combined too: not blended.
                             gpu.state.blend_set("NONE")
-                            shader = self._shaders[self._lighting_shader_names()[-1]]
+                            shader = self._shaders[self._lighting_names[-1]]
                             batch = self.resources.fullscreen_batch(shader)
                         shader.bind()
                         shader.uniform_block("camera", camera_ubo)

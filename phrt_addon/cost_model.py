@@ -184,20 +184,22 @@ class FrameStats:
     trace_overhead_ms: float | None = None
 
 
-def _finite_non_negative(value) -> float | None:
+def _finite_at_least(value, low: float, strict: bool) -> float | None:
+    """``value`` as a float when it is finite and above ``low`` (or equal, unless ``strict``);
+    None when it is not (unusable measurements teach nothing)."""
     try:
         value = float(value)
     except (TypeError, ValueError):
         return None
-    return value if math.isfinite(value) and value >= 0 else None
+    return value if math.isfinite(value) and (value > low or (value == low and not strict)) else None
+
+
+def _finite_non_negative(value) -> float | None:
+    return _finite_at_least(value, 0.0, strict=False)
 
 
 def _finite_positive(value) -> float | None:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) and value > 0 else None
+    return _finite_at_least(value, 0.0, strict=True)
 
 
 class CostModel:

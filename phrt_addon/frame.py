@@ -229,7 +229,7 @@ class FrameRenderer:
         depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, np.float32(1e10)).astype(np.float32,
                                                                                                     copy=False)
         if combined is not None:  # None: the image stayed on the GPU (the viewport draws it there)
-            combined = shading.finite_rgba(combined, copy=False)  # the read-back is this frame's own
+            combined = shading.finite_rgba(combined)  # the read-back is this frame's own: made finite in place
         element = index.astype(np.float32) + np.float32(1.0)
         element[index == n] = 0.0
         return FramePasses(

@@ -309,6 +309,9 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         time_left = model.time_left(settings.budget_ms, raster_ms) if time_left_ms is None else time_left_ms
         time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
 
+    # Tracing anything costs a fixed part first (reading the layers back, the moving objects'
+    # BVH, the pixels' tiles), charged once when the model predicts the times.
+    overhead = model.trace_overhead_ms() if time_left_ms is None and element_ms is None else 0.0
     n = len(elements)
     eligible = terms.candidate & terms.visible
     if settings.mode == "HYBRID":
@@ -319,9 +322,7 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     if settings.mode == "HYBRID":
         nodes = np.flatnonzero(eligible)
         graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes], settings.order)
-        # Tracing anything costs a fixed part first (reading the layers back, the moving objects'
-        # BVH, the pixels' tiles): the elements share what is left of T after it.
-        overhead = model.trace_overhead_ms() if time_left_ms is None and element_ms is None else 0.0
+        # The elements share what is left of T after the fixed part.
         node_selected, node_phase, predicted_trace = graph.select(max(time_left - overhead, 0.0), settings.n_parallel)
         if np.any(node_selected):
             predicted_trace += overhead
@@ -333,8 +334,8 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         phase[selected] = 1
         trace_order = np.flatnonzero(selected)[np.lexsort((np.flatnonzero(selected), -terms.relevance[selected]))]
         predicted_trace = float(np.sum(predicted_ms[selected]))
-        if np.any(selected) and time_left_ms is None and element_ms is None:
-            predicted_trace += model.trace_overhead_ms()
+        if np.any(selected):
+            predicted_trace += overhead
     else:
         predicted_trace = 0.0
 

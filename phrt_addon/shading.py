@@ -240,13 +240,13 @@ def finite(image, limit=1e6):
     return np.clip(np.nan_to_num(image, nan=0.0, posinf=limit, neginf=0.0), 0.0, limit)
 
 
-def finite_rgba(image, limit=1e6, copy=True) -> np.ndarray:
-    """An RGBA float32 image with ``finite`` radiance and alpha 1: a new array, or with
-    ``copy=False`` ``image`` itself when it is already C-ordered float32 (changed in place)."""
-    out = np.array(image, dtype=np.float32, order="C", copy=True) if copy else \
-        np.asarray(image, dtype=np.float32, order="C")
-    # The common case (a GPU composite already clamps) costs two reductions, not a rewrite.
-    if not (np.isfinite(out).all() and out.min() >= 0.0 and out.max() <= limit):
-        out = np.clip(np.nan_to_num(out, nan=0.0, posinf=limit, neginf=0.0), 0.0, limit)
+def finite_rgba(image, limit=1e6) -> np.ndarray:
+    """``image`` as C-ordered float32 RGBA with ``finite`` radiance and alpha 1: the array
+    itself (changed in place) when it already is one, else a converted copy."""
+    out = np.asarray(image, dtype=np.float32, order="C")
+    rgb = out[..., :3]
+    # The common case (a GPU composite already clamps) costs reductions, not a rewrite.
+    if not (np.isfinite(rgb).all() and rgb.min(initial=0.0) >= 0.0 and rgb.max(initial=0.0) <= limit):
+        out[..., :3] = finite(rgb, limit)
     out[..., 3] = 1.0
     return out
