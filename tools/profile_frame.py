@@ -1,0 +1,77 @@
+"""Where a frame's time goes: median wall and calling-thread CPU ms of the GPU frame's steps
+over a replay, and the run's stage means (what the cost model sees).
+
+    .venv/bin/python tools/profile_frame.py arcade                     # RASTER, frames 200-239
+    .venv/bin/python tools/profile_frame.py atrium --mode HYBRID --budget-ms 160
+
+A/B against another checkout: make a directory holding a link named ``phrt`` to it and put
+that directory first on PYTHONPATH (``PYTHONPATH=/tmp/base .venv/bin/python tools/...``);
+run the two alternately, several times: this kind of machine varies by tens of percent.
+Wall > CPU in a step means its thread waited (for llvmpipe's rasterizer threads)."""
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+STEPS = ("draw", "_draw_gbuffer", "_resolve", "gbuffer", "shade", "_light", "_composite")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scene")
+    parser.add_argument("--mode", default="RASTER")
+    parser.add_argument("--frames", default="200-239")
+    parser.add_argument("--budget-ms", type=float, default=None)
+    parser.add_argument("--resolution", default="640x480")
+    args = parser.parse_args(argv)
+    from phrt import bench, cli
+    from phrt.engine import raster, replay
+    timings = {}
+
+    def timed(name, function):
+        def wrapper(*a, **k):
+            wall, cpu = time.perf_counter(), time.thread_time()
+            try:
+                return function(*a, **k)
+            finally:
+                timings.setdefault(name, []).append(((time.perf_counter() - wall) * 1000.0,
+                                                     (time.thread_time() - cpu) * 1000.0))
+        return wrapper
+
+    for step in STEPS:
+        setattr(raster.GPUFrame, step, timed(step, getattr(raster.GPUFrame, step)))
+    cli._blender()
+    import bpy
+    label = cli.load_scene(args.scene)
+    scene = bpy.context.scene
+    width, height = (int(v) for v in args.resolution.lower().split("x"))
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
+    camera = replay.find_path(scene, None)
+    frames = replay.parse_frames(args.frames, replay.path_frame_range(scene, camera))
+    with tempfile.TemporaryDirectory() as temp:
+        with cli._quiet_stdout():
+            result = replay.replay(scene, camera, frames, args.mode.upper(), Path(temp) / "run", images="none",
+                                   scene_label=label, budget_ms=args.budget_ms)
+        rows = bench._frame_rows(result.run_dir)
+    print(f"{label} {args.mode.upper()} frames {args.frames} at {width}x{height}: medians over frames 4+ "
+          f"(wall / calling-thread CPU ms)")
+    for step in STEPS:
+        values = timings.get(step, [])[3:]
+        if values:
+            print(f"  {step:>14} {statistics.median(v[0] for v in values):7.1f} / "
+                  f"{statistics.median(v[1] for v in values):6.1f}  ({len(values)} calls)")
+    print("run means (frames 2+, one-time work out):", ", ".join(
+        f"{key[:-3]} {bench._mean(rows, key):.1f}" for key in
+        ("total_ms", "wall_ms", "gbuffer_ms", "lighting_ms", "select_ms", "trace_ms", "readback_ms")))
+    totals = [row["total_ms"] for row in rows]
+    if args.budget_ms:
+        print(f"budget {args.budget_ms:.1f}: mean {statistics.mean(totals) / args.budget_ms:.3f}x, "
+              f"p95 {bench._p95(rows, 'total_ms') / args.budget_ms:.3f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
