@@ -31,14 +31,15 @@ import time
 
 import numpy as np
 
-from . import benefit, heuristic, shading
-from .cost_model import CostModel, FrameStats
+from .select import benefit, heuristic
+from .scene import shading
+from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame, TracedTerms
-from .gbuffer import element_pixel_stats
+from .raster.gbuffer import element_pixel_stats
 from .problems import ProblemLog
-from .scene import SceneSnapshot
-from .shadow_region import ElementBounds, ShadowRegionIndex
-from .trace_stage import TraceResult, TraceStage
+from .scene.snapshot import SceneSnapshot
+from .trace.shadow_region import ElementBounds, ShadowRegionIndex
+from .trace.stage import TraceResult, TraceStage
 
 # The frame's data types (frame_types.py) are part of this module's interface.
 __all__ = ["FOOTPRINT_STEP", "FramePasses", "FrameRenderer", "FrameResult", "LayerPixels", "RasterFrame",
@@ -66,7 +67,7 @@ class FrameRenderer:
         self.trace_stage = TraceStage(threads)
         self.frames_rendered = 0
         self.element_bounds = ElementBounds()
-        # The error-aware relevance's per-element estimates (phrt_addon/benefit.py).
+        # The error-aware relevance's per-element estimates (phrt_addon/select/benefit.py).
         self.benefit_model = benefit.BenefitModel()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None

@@ -2,7 +2,7 @@
 """
 from pathlib import Path
 
-from .. import oracle
+from . import oracle
 from .document import _Table, _sections
 from .markup import _html, _markdown
 from .plots import _plot_error_vs_time, _plot_selection_quality, _plot_timeline
@@ -15,7 +15,7 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
 
     ``reference`` is a RUN_DIR (added to the runs if it is not among them);
     by default each path's raytrace run.  ``oracle_dir`` is an oracle folder
-    (``phrt_addon/oracle.py``); by default the ``oracle`` folder beside the runs,
+    (``phrt_addon/report/oracle.py``); by default the ``oracle`` folder beside the runs,
     when they share one parent folder.  ``failures`` are (job, one-line message)
     pairs of a plan's jobs that failed, listed first.  Raises ``ValueError`` with
     a message for the user when a RUN_DIR is unusable or there is no reference at all.

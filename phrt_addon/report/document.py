@@ -5,7 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import defaults, metrics, oracle, runlog
+from .. import defaults
+from . import metrics, oracle
+from ..runs import run_log
 from .runs import BASELINE_VARIANT, PAPER_SCENES, PAPER_TABLE_II, WORST_ELEMENTS
 from .selection import RunRegret, variant_label
 
@@ -135,7 +137,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
 
     stability_rows = []
     for run in runs:
-        rates = runlog.flips_per_element_per_100(run.selection)
+        rates = run_log.flips_per_element_per_100(run.selection)
         worst = sorted(((rate, element) for element, rate in rates.items() if rate > 0),
                        key=lambda item: (-item[0], item[1]))[:WORST_ELEMENTS]
         values = np.array(list(rates.values()), dtype=float)
@@ -260,7 +262,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                 continue
             per_element = pop.per_element()
             worst = sorted(per_element.items(), key=lambda item: (-item[1][1], item[0]))[:WORST_ELEMENTS]
-            rates = np.array(list(runlog.flips_per_element_per_100(run.selection).values()), dtype=float)
+            rates = np.array(list(run_log.flips_per_element_per_100(run.selection).values()), dtype=float)
             pop_rows.append([
                 run.label, run.mode.lower(), str(len(pop.pops)),
                 _number(float(rates.mean()) if rates.size else None, ".2f"),

@@ -10,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import defaults, metrics, runlog
+from .. import defaults
+from . import metrics
+from ..runs import run_log
 
 
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
@@ -101,7 +103,7 @@ class Run:
         return float(np.percentile(values, q)) if values.size else None
 
     def image(self, frame):
-        return runlog.frame_image_path(self.run_dir, frame)
+        return run_log.frame_image_path(self.run_dir, frame)
 
     @property
     def has_images(self):
@@ -151,15 +153,15 @@ def load_run(run_dir):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ValueError(f"{run_dir} is not a directory: give a RUN_DIR written by 'phrt render'")
-    if not (run_dir / runlog.FRAMES_CSV).exists():
-        raise ValueError(f"{run_dir} has no {runlog.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
+    if not (run_dir / run_log.FRAMES_CSV).exists():
+        raise ValueError(f"{run_dir} has no {run_log.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
     try:
-        summary = runlog.read_summary(run_dir)
+        summary = run_log.read_summary(run_dir)
     except FileNotFoundError:
-        raise ValueError(f"{run_dir} has no {runlog.SUMMARY_JSON}: the run did not finish; "
+        raise ValueError(f"{run_dir} has no {run_log.SUMMARY_JSON}: the run did not finish; "
                          f"render it again") from None
     return Run(run_dir=run_dir, label=run_dir.name, summary=summary,
-               frames=runlog.read_frames(run_dir), selection=runlog.read_selection(run_dir))
+               frames=run_log.read_frames(run_dir), selection=run_log.read_selection(run_dir))
 
 
 def pareto_front(times_ms, errors):
@@ -269,4 +271,4 @@ def _write_errors_csv(path, runs, errors):
             for row in outcome.per_frame:
                 values = {"scene": run.scene, "path": run.path, "run": run.label, "mode": run.mode,
                           "reference": outcome.reference.label, **row}
-                writer.writerow([runlog.format_value(values[key]) for key in ERROR_COLUMNS])
+                writer.writerow([run_log.format_value(values[key]) for key in ERROR_COLUMNS])

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import heuristic
-from phrt.phrt_addon.cost_model import EFFECTS, CostModel, FrameStats
+from phrt.phrt_addon.select import heuristic
+from phrt.phrt_addon.select.cost_model import EFFECTS, CostModel, FrameStats
 
 FRAME_PX = 640 * 480
 RASTER_MS, SELECT_MS, COMPOSITE_MS = 30.0, 1.0, 4.0

@@ -8,11 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import heuristic
-from phrt.phrt_addon.cost_model import (
-    EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats,
-    RobustEstimate, normalise_cost_mode,
-)
+from phrt.phrt_addon.select import heuristic
+from phrt.phrt_addon.select.cost_model import EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats, RobustEstimate, normalise_cost_mode
 
 TRUE_MS_PER_RAY = np.array([1e-4, 4e-4, 6e-4])  # shadows, reflections, refractions
 RAYS_PER_PIXEL_OF_EFFECT = np.array([2.0, 1.0, 3.0])  # 2 lights, 1 reflection, 3 refraction bounces
