@@ -127,7 +127,7 @@ def parse_resolution(text):
 
 def _check_output_dir(path):
     """Raise UserError unless ``path`` can be created and written (creates nothing)."""
-    from ..phrt_addon.runs.run_log import output_dir_problem
+    from ..phrt_addon.runs.run_files import output_dir_problem
     problem = output_dir_problem(path)
     if problem is not None:
         raise UserError(problem)

@@ -27,7 +27,7 @@ def replay_bench(scene_name, frames, out=print):
     from . import blender_process
     from ..engine.runs import replay
     from ..engine.runs import camera_path
-    from ..phrt_addon.runs import run_log
+    from ..phrt_addon.runs import run_files
     blender_process.blender()
     import bpy
     label = cli.load_scene(scene_name)
@@ -42,7 +42,7 @@ def replay_bench(scene_name, frames, out=print):
             with blender_process.quiet_stdout():
                 result = replay.replay(scene, camera, frame_range, mode, Path(temp) / mode, images="none",
                                        scene_label=label)
-            frames_read = run_log.read_frames(result.run_dir)[1:] or run_log.read_frames(result.run_dir)
+            frames_read = run_files.read_frames(result.run_dir)[1:] or run_files.read_frames(result.run_dir)
             mean = {key: sum(float(r[key] or 0) for r in frames_read) / len(frames_read)
                     for key in ("total_ms", "raster_ms", "select_ms", "trace_ms", "composite_ms", "rays",
                                 "n_selected")}
@@ -79,8 +79,8 @@ def _frame_rows(run_dir):
     """The frames of a run with their one-time work taken out (``total_ms - setup_ms``: shader
     compiles, uploads, new shadow maps, Embree builds), as the budget loop sees them; the first
     frame (cold caches) is left out."""
-    from ..phrt_addon.runs import run_log
-    rows = run_log.read_frames(run_dir)
+    from ..phrt_addon.runs import run_files
+    rows = run_files.read_frames(run_dir)
     rows = rows[1:] if len(rows) > 1 else rows
     for row in rows:
         row["setup_frame"] = float(row.get("setup_ms") or 0.0) > 1.0

@@ -24,7 +24,7 @@ from ..engine import candidate_list
 from ..engine.runs import replay
 from ..engine.runs import camera_path
 from ..properties import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_FLAG_ITEMS
-from ..phrt_addon.runs import run_log
+from ..phrt_addon.runs import run_files
 from ..engine.runs.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
 
 # Events a running replay lets through, so the designer can still look around.
@@ -45,7 +45,7 @@ def output_root(output_dir: str) -> Path:
 
 def check_output_root(root: Path):
     """ReplayError unless the folder ``root`` can be created and written (creates nothing)."""
-    problem = run_log.output_dir_problem(root)
+    problem = run_files.output_dir_problem(root)
     if problem is not None:
         raise camera_path.ReplayError(problem)
 

@@ -16,6 +16,8 @@ from bpy.props import StringProperty
 
 from ..engine import session
 from ..phrt_addon.runs import run_log
+from ..phrt_addon import schema
+from ..phrt_addon.runs import run_files
 from ..properties import BLEND_RELATIVE_PATH
 
 FORMATS = (".csv", ".json")
@@ -27,7 +29,7 @@ class SelectionLogError(ValueError):
 
 
 def _columns(rows) -> list:
-    columns = list(run_log.SELECTION_COLUMNS)
+    columns = list(schema.SELECTION_COLUMNS)
     for row in rows:
         columns += [key for key in row if key not in columns]
     return columns
@@ -74,10 +76,10 @@ def rows_to_export(run_dir: str = "") -> list:
     if not run_dir:
         return list(session.last_frame().rows)
     folder = Path(bpy.path.abspath(run_dir))
-    if not (folder / run_log.SELECTION_CSV).is_file():
-        raise SelectionLogError(f"'{run_dir}' is not a run folder (no {run_log.SELECTION_CSV}): give a folder "
+    if not (folder / schema.SELECTION_CSV).is_file():
+        raise SelectionLogError(f"'{run_dir}' is not a run folder (no {schema.SELECTION_CSV}): give a folder "
                                 f"written by phrt.replay_path or 'phrt render'")
-    return run_log.read_selection(folder)
+    return run_files.read_selection(folder)
 
 
 class PHRT_OT_export_selection_log(bpy.types.Operator):

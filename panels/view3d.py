@@ -13,7 +13,6 @@ renderer settings are in Properties > Render (``panels/render.py``).
 import bpy
 
 from ..engine import candidate_list, session, viewport
-from ..engine.runs import replay
 from ..engine.runs import camera_path
 from . import candidates
 

@@ -233,8 +233,8 @@ def big_mesh(args, counter, out):
         except camera_path.ReplayError as error:
             runs[mode] = {"refused": str(error)}
             continue
-        from phrt.phrt_addon.runs import run_log
-        rows = run_log.read_frames(out / f"big-{mode.lower()}")
+        from phrt.phrt_addon.runs import run_files
+        rows = run_files.read_frames(out / f"big-{mode.lower()}")
         runs[mode] = {
             "wall_s": time.perf_counter() - begin,
             "frames": [{key: row.get(key) for key in ("total_ms", "raster_ms", "trace_ms", "composite_ms",

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ...phrt_addon.select import mode_budgets
 from ...phrt_addon.runs import run_log
+from ...phrt_addon.runs import run_files
 from .. import extract
 
 # Measured frames per mode (after one warm-up frame): a few seconds at 640x480 here.
@@ -33,7 +34,7 @@ def calibrate(scene, camera, frame_range, fraction, *, runner, resolution=None,
             while run.remaining:
                 run.step()
             run.finish()
-            means[mode] = mode_budgets.steady_mean_ms(run_log.read_frames(run_dir)[1:])
+            means[mode] = mode_budgets.steady_mean_ms(run_files.read_frames(run_dir)[1:])
     return mode_budgets.BudgetResolution(fraction=float(fraction), raster_ms=means["RASTER"], raytrace_ms=means["RAYTRACE"],
                                    method="calibration",
                                    detail={"calibration_frames": frames, "warm_up_frames": 1})

@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 
 from ...phrt_addon.report import metrics, oracle
-from ...phrt_addon.runs import run_log
+from ...phrt_addon.runs import run_files
 from .. import extract, final
 
 
@@ -68,7 +68,7 @@ class ForcedRenderer:
 
 def _selection_by_frame(run_dir):
     chosen = {}
-    for row in run_log.read_selection(run_dir):
+    for row in run_files.read_selection(run_dir):
         if row["selected"]:
             chosen.setdefault(row["frame"], set()).add(str(row["element"]))
     return chosen
@@ -79,14 +79,14 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
     """Measure candidates on every ``every``-th frame of the reference run and the regret of each
     hybrid run (``{label: run dir}``); write the oracle folder ``out_dir``.  Returns its info."""
     reference_dir = Path(reference_dir)
-    reference_frames = [row["frame"] for row in run_log.read_frames(reference_dir)]
+    reference_frames = [row["frame"] for row in run_files.read_frames(reference_dir)]
     frames = oracle.sampled_frames(reference_frames, every)
-    runs = {label: {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_log.read_frames(run_dir)},
+    runs = {label: {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_files.read_frames(run_dir)},
                     "selected": _selection_by_frame(run_dir)} for label, run_dir in hybrid_dirs.items()}
     measured, regret_rows = [], []
     with ForcedRenderer(scene, camera, resolution) as renderer:
         for count, frame in enumerate(frames):
-            reference_path = run_log.frame_image_path(reference_dir, frame)
+            reference_path = run_files.frame_image_path(reference_dir, frame)
             if reference_path is None:
                 continue
             reference = metrics.read_image(reference_path)
@@ -120,7 +120,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
             errors = {frozenset(): flip_raster, **{frozenset((n,)): e for n, e in zip(names, alone.tolist())}}
             for label, run in runs.items():
                 row = run["frames"].get(frame)
-                run_image = run_log.frame_image_path(run["dir"], frame)
+                run_image = run_files.frame_image_path(run["dir"], frame)
                 if row is None or run_image is None:
                     continue
                 heuristic_set = frozenset(run["selected"].get(frame, set()))

@@ -31,6 +31,8 @@ import bpy
 
 from ... import compat
 from ...phrt_addon.runs import run_log
+from ...phrt_addon import schema
+from ...phrt_addon.runs import run_files
 from ...phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from .. import extract, final
 from .camera_path import ReplayError
@@ -121,7 +123,7 @@ class SteppedReplay:
             budget_ms = resolved.budget_ms
             budget_source = resolved.as_summary()
         self.run_dir = Path(run_dir)
-        self.frames_dir = self.run_dir / run_log.FRAMES_DIR
+        self.frames_dir = self.run_dir / schema.FRAMES_DIR
         try:
             self.frames_dir.mkdir(parents=True, exist_ok=True)
             probe = self.run_dir / ".phrt-write-test"
@@ -198,7 +200,7 @@ class SteppedReplay:
             if self.images != "none":
                 self._commit_image(frame, blender_said)
             blender_said.forward()
-            row = {key: result.stats.get(key) for key in run_log.FRAME_COLUMNS}
+            row = {key: result.stats.get(key) for key in schema.FRAME_COLUMNS}
             row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
             self.log.add_frame(row, result.selection_rows)
@@ -229,7 +231,7 @@ class SteppedReplay:
         4.5): it is removed and reported in one line."""
         extension = ".exr" if self.images == "exr" else ".png"
         partial = self.frames_dir / f".{frame:04d}.partial{extension}"
-        if not run_log.image_is_complete(partial):
+        if not run_files.image_is_complete(partial):
             self._drop_partial_images(frame)
             reason = blender_said.reason() if blender_said is not None else ""
             raise ReplayError(f"frame {frame} could not be written completely to '{self.frames_dir}' (is the disk "

@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from ..runs import run_log
+from .. import schema
 
 ORACLE_DIR = "oracle"
 ORACLE_JSON = "oracle.json"
@@ -176,7 +177,7 @@ def trace_overhead_ms(alone_ms, together_ms) -> float:
 
 def summary_hash(run_dir) -> str | None:
     """Hash of a run's ``summary.json`` (None when missing): what the oracle was computed from."""
-    path = Path(run_dir) / run_log.SUMMARY_JSON
+    path = Path(run_dir) / schema.SUMMARY_JSON
     if not path.is_file():
         return None
     return hashlib.blake2b(path.read_bytes(), digest_size=12).hexdigest()

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics
-from ..runs import run_log
+from ..runs import run_files
 from ..schema import ELEMENT_PASS
 
 # Pixels around an element's bounding box given to FLIP (its filters reach a few pixels).
@@ -88,7 +88,7 @@ class _Frames:
 
     def get(self, frame):
         if frame not in self.cache:
-            path = run_log.frame_image_path(self.run_dir, frame)
+            path = run_files.frame_image_path(self.run_dir, frame)
             if path is None:
                 self.cache[frame] = None
             elif self.elements:
@@ -115,13 +115,13 @@ def measure_popping(run_dir, reference_dir, selection_rows=None, reference_maps=
     ``reference_maps``: a dict shared by the runs of one reference, caching the reference's
     FLIP maps by (frames, window) (an element covers the same pixels in every run)."""
     reference_maps = {} if reference_maps is None else reference_maps
-    rows = run_log.read_selection(run_dir) if selection_rows is None else selection_rows
+    rows = run_files.read_selection(run_dir) if selection_rows is None else selection_rows
     by_frame = {}
     for row in rows:
         by_frame.setdefault(int(row["frame"]), []).append((str(row["element"]), bool(row["selected"])))
-    frames = sorted(set(by_frame) | {int(row["frame"]) for row in run_log.read_frames(run_dir)})
+    frames = sorted(set(by_frame) | {int(row["frame"]) for row in run_files.read_frames(run_dir)})
     result = PoppingResult(frame_count=len(frames))
-    first = run_log.frame_image_path(run_dir, frames[0]) if frames else None
+    first = run_files.frame_image_path(run_dir, frames[0]) if frames else None
     if first is None or first.suffix.lower() != ".exr":
         result.note = "no EXR frame images: popping not measured"
         return result

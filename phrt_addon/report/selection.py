@@ -14,7 +14,7 @@ from ..runs import run_log
 from .runs import METRIC_THREADS, SWEEP_COLUMNS
 
 
-def _measure_popping(runs, references):
+def measure_run_popping(runs, references):
     """{id(run): PoppingResult} for runs with images whose path has a reference with images."""
     pops = {}
     reference_maps = {}  # shared by the runs (threads may both compute a map: same value)
@@ -35,7 +35,7 @@ def _measure_popping(runs, references):
     return pops
 
 
-def _oracle_results(runs, oracle_dir):
+def load_oracle_results(runs, oracle_dir):
     """The oracle folder's results (several folders, e.g. two sweeps, are merged)."""
     if oracle_dir is None:
         parents = {run.run_dir.resolve().parent for run in runs}
@@ -74,7 +74,7 @@ class RunRegret:
     note: str = ""
 
 
-def _regrets(runs, results):
+def run_regrets(runs, results):
     """{id(run): RunRegret} of the hybrid runs."""
     regrets = {}
     for run in runs:
@@ -156,7 +156,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
     return rows
 
 
-def _write_sweep(csv_path, json_path, rows, oracle_results):
+def write_sweep(csv_path, json_path, rows, oracle_results):
     temporary = csv_path.with_name(csv_path.name + ".tmp")
     with open(temporary, "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle, lineterminator="\n")

@@ -44,7 +44,7 @@ from typing import Callable, Protocol, Sequence
 
 from .. import defaults
 from ..report import oracle
-from . import run_log
+from .. import schema
 
 PLAN_JSON = "plan.json"
 PLAN_VERSION = 1
@@ -210,7 +210,7 @@ def same_work(old: Plan, new: Plan) -> bool:
 
 def run_is_complete(run_dir, plan: Plan) -> bool:
     """A finished run of the plan's whole frame range (not partial, not cancelled)."""
-    path = Path(run_dir) / run_log.SUMMARY_JSON
+    path = Path(run_dir) / schema.SUMMARY_JSON
     if not path.is_file():
         return False
     try:

@@ -32,15 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .run_files import frame_image_path, image_is_complete, output_dir_problem, read_frames, read_selection, read_summary
-from ..schema import BOOL_COLUMNS, FRAME_COLUMNS, FRAMES_CSV, FRAMES_DIR, REASONS, SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, STRING_COLUMNS, SUMMARY_JSON
+from ..schema import FRAME_COLUMNS, FRAMES_CSV, REASONS, SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, SUMMARY_JSON
 
-# The readers (run_files.py) and the run's column names (schema.py) are part of this module's
-# interface: callers write a run with RunLog and read it back with runlog.read_frames(...).
-__all__ = ["BOOL_COLUMNS", "FRAME_COLUMNS", "FRAMES_CSV", "FRAMES_DIR", "REASONS", "SELECTION_COLUMNS",
-           "SELECTION_CSV", "STAGE_COLUMNS", "STRING_COLUMNS", "SUMMARY_JSON", "RunLog", "finite_or_none",
-           "flips_per_element_per_100", "format_value", "frame_image_path", "image_is_complete", "machine_info",
-           "output_dir_problem", "read_frames", "read_selection", "read_summary", "summarize"]
 
 log = logging.getLogger(__name__)
 

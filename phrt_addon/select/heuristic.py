@@ -67,14 +67,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .cost_model import MAX_PREDICTED_MS, CostModel
-from ..schema import MODES, ORDERS, REASONS, RELEVANCES, SELECTION_COLUMNS
-from .selection_terms import ElementTerms, FrameElements, SelectionSettings, _finite, element_terms
+from ..schema import ORDERS, SELECTION_COLUMNS
+from .selection_terms import ElementTerms, FrameElements, SelectionSettings, clamp_finite, element_terms
 
-# The selection's inputs and terms live in selection_terms.py; they are part of this module's
-# interface (callers build FrameElements and SelectionSettings and call select()).
-__all__ = ["MODES", "ORDERS", "REASONS", "RELEVANCES", "SELECTION_COLUMNS", "ElementTerms", "FrameElements",
-           "SelectionGraph", "SelectionResult", "SelectionSettings", "element_terms", "force_selection",
-           "previously_selected_mask", "select"]
 
 # The smallest predicted cost an R-per-ms order divides by (a 0 ms node comes first).
 MIN_ORDER_MS = 1e-6
@@ -294,7 +289,7 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         predicted_ms = np.asarray(element_ms, dtype=np.float64)
         if predicted_ms.shape != (len(elements),):
             raise ValueError(f"element_ms has shape {predicted_ms.shape}, expected ({len(elements)},)")
-        predicted_ms = _finite(predicted_ms, nan=0.0, low=0.0, high=MAX_PREDICTED_MS)
+        predicted_ms = clamp_finite(predicted_ms, nan=0.0, low=0.0, high=MAX_PREDICTED_MS)
     budget_ms = settings.budget_ms
     if settings.mode == "RASTER":
         time_left = 0.0
@@ -303,11 +298,11 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
         # visible candidate (RAYTRACE's selection), with the same non-trace stages.
         traced_by_raytrace = terms.candidate & terms.visible
         time_left = settings.budget_at * float(np.sum(predicted_ms[traced_by_raytrace]))
-        time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
+        time_left = float(clamp_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
         budget_ms = float(min(model.non_trace_ms() + time_left, MAX_PREDICTED_MS))
     else:
         time_left = model.time_left(settings.budget_ms, raster_ms) if time_left_ms is None else time_left_ms
-        time_left = float(_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
+        time_left = float(clamp_finite(time_left, nan=0.0, low=0.0, high=MAX_PREDICTED_MS))
 
     # Tracing anything costs a fixed part first (reading the layers back, the moving objects'
     # BVH, the pixels' tiles), charged once when the model predicts the times.

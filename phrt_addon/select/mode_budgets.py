@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runs import run_log
+from .. import schema
+from ..runs import run_files
 
 
 def budget_between(fraction: float, raster_ms: float, raytrace_ms: float) -> float:
@@ -76,7 +77,7 @@ class BudgetResolution:
 
 
 def _complete_summary(run_dir: Path):
-    path = run_dir / run_log.SUMMARY_JSON
+    path = run_dir / schema.SUMMARY_JSON
     if not path.is_file():
         return None
     try:
@@ -121,8 +122,8 @@ def find_reference_runs(search_dirs, scene: str, path: str, resolution, cpu_mode
 
 def from_runs(fraction: float, raster_dir, raytrace_dir) -> BudgetResolution:
     """Resolve ``fraction`` from the steady means of two complete runs."""
-    raster_ms = steady_mean_ms(run_log.read_frames(raster_dir))
-    raytrace_ms = steady_mean_ms(run_log.read_frames(raytrace_dir))
+    raster_ms = steady_mean_ms(run_files.read_frames(raster_dir))
+    raytrace_ms = steady_mean_ms(run_files.read_frames(raytrace_dir))
     if raster_ms is None or raytrace_ms is None:
         raise ValueError(f"runs {raster_dir} and {raytrace_dir} need frames to resolve a budget")
     return BudgetResolution(fraction=float(fraction), raster_ms=raster_ms, raytrace_ms=raytrace_ms, method="runs",

@@ -84,7 +84,7 @@ MAX_SELECTION_WEIGHT = 1e6
 MAX_VISIBILITY = 1e12
 
 
-def _finite(values, *, nan: float, low: float, high: float) -> np.ndarray:
+def clamp_finite(values, *, nan: float, low: float, high: float) -> np.ndarray:
     array = np.nan_to_num(np.asarray(values, dtype=np.float64), nan=nan, posinf=high, neginf=low)
     return np.clip(array, low, high)
 
@@ -155,11 +155,11 @@ class FrameElements:
         near = float(self.near_clip)
         self.near_clip = max(near, MIN_NEAR_CLIP_DISTANCE) if 0 < near < FAR_DISTANCE else NEAR_CLIP_DISTANCE
         self.distance = column("distance", 1.0, np.float64).astype(np.float64)
-        self.priority = _finite(column("priority", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_PRIORITY)
-        self.rt_cost = _finite(column("rt_cost", 1.0, np.float64), nan=1.0, low=0.0, high=MAX_RT_COST)
-        self.rays_per_pixel = _finite(column("rays_per_pixel", 1.0, np.float64), nan=0.0, low=0.0,
+        self.priority = clamp_finite(column("priority", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_PRIORITY)
+        self.rt_cost = clamp_finite(column("rt_cost", 1.0, np.float64), nan=1.0, low=0.0, high=MAX_RT_COST)
+        self.rays_per_pixel = clamp_finite(column("rays_per_pixel", 1.0, np.float64), nan=0.0, low=0.0,
                                       high=MAX_RAYS_PER_PIXEL)
-        self.benefit = _finite(column("benefit", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_VISIBILITY)
+        self.benefit = clamp_finite(column("benefit", 1.0, np.float64), nan=0.0, low=0.0, high=MAX_VISIBILITY)
 
     def __len__(self) -> int:
         return len(self.names)
@@ -250,7 +250,7 @@ def element_terms(elements: FrameElements, previously_selected: np.ndarray, sele
     centre_closeness = np.where(centre_ok, np.clip(1.0 - edge_distance, 0.0, 1.0), 0.0)
 
     near = elements.near_clip
-    distance = _finite(elements.distance, nan=near, low=near, high=FAR_DISTANCE)
+    distance = clamp_finite(elements.distance, nan=near, low=near, high=FAR_DISTANCE)
 
     candidate = elements.candidate & (elements.priority > 0)
     within_area = area_fraction <= max_area_fraction
@@ -259,7 +259,7 @@ def element_terms(elements: FrameElements, previously_selected: np.ndarray, sele
     scale = float(raw_visibility[competing].max()) if np.any(competing) else 0.0
     if not (np.isfinite(scale) and scale > 0):
         scale = 1.0
-    visibility = _finite(raw_visibility / scale, nan=0.0, low=0.0, high=MAX_VISIBILITY)
+    visibility = clamp_finite(raw_visibility / scale, nan=0.0, low=0.0, high=MAX_VISIBILITY)
 
     cost = visibility * elements.rt_cost
     selected_before = np.asarray(previously_selected, dtype=bool)
@@ -270,7 +270,7 @@ def element_terms(elements: FrameElements, previously_selected: np.ndarray, sele
         weighted_scale = float(raw_weighted[competing].max()) if np.any(competing) else 0.0
         if not (np.isfinite(weighted_scale) and weighted_scale > 0):
             weighted_scale = 1.0
-        weighted = _finite(raw_weighted / weighted_scale, nan=0.0, low=0.0, high=MAX_VISIBILITY)
+        weighted = clamp_finite(raw_weighted / weighted_scale, nan=0.0, low=0.0, high=MAX_VISIBILITY)
         relevance_visibility = weighted
     relevance = (selected_before * float(selection_weight) + relevance_visibility) * elements.priority
     return ElementTerms(

@@ -10,7 +10,8 @@ from phrt.phrt_addon.scene.snapshot import Material
 from phrt.phrt_addon.select import benefit, heuristic
 from phrt.phrt_addon.scene import shading
 from phrt.phrt_addon.select.cost_model import CostModel
-from phrt.phrt_addon.select.heuristic import FrameElements, SelectionSettings, select
+from phrt.phrt_addon.select.heuristic import select
+from phrt.phrt_addon.select.selection_terms import FrameElements, SelectionSettings
 
 
 def frame(n, **fields):

@@ -24,7 +24,7 @@ import bmesh  # noqa: E402
 
 from phrt.engine import extract, final, raster, session  # noqa: E402
 from phrt.phrt_addon.raster import reference_raster  # noqa: E402
-from phrt.phrt_addon.frame import TracedTerms  # noqa: E402
+from phrt.phrt_addon.frame_types import TracedTerms
 from phrt.phrt_addon.scene.snapshot import Element, Material, MeshInstance  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
