@@ -13,7 +13,7 @@ import os
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent
+ROOT = Path(__file__).resolve().parent.parent  # the repository (extension) root, above cli/
 SAMPLE_DIR = ROOT / "sample_scenes"
 
 
