@@ -28,7 +28,8 @@ def main(argv=None):
     parser.add_argument("--resolution", default="640x480")
     args = parser.parse_args(argv)
     from phrt import bench, cli
-    from phrt.engine import raster, replay
+    from phrt.engine import replay
+    from phrt.engine.gpu import frame as raster
     timings = {}
 
     def timed(name, function):

@@ -22,7 +22,8 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 import bmesh  # noqa: E402
 
-from phrt.engine import extract, final, raster, session  # noqa: E402
+from phrt.engine import extract, final, session  # noqa: E402
+from phrt.engine.gpu import frame as raster, lighting_glsl  # noqa: E402
 from phrt.phrt_addon import lighting  # noqa: E402
 from phrt.phrt_addon.frame import TracedTerms  # noqa: E402
 from phrt.phrt_addon.scene import Element, Material, MeshInstance  # noqa: E402
@@ -86,7 +87,7 @@ def assert_parity(gpu_image, reference, gbuffer):
     assert np.median(relative[lit]) < 1e-4
 
 
-@pytest.mark.parametrize("extra_lights", [0, raster.shaders.LIGHTS_PER_PASS - 4])
+@pytest.mark.parametrize("extra_lights", [0, lighting_glsl.LIGHTS_PER_PASS - 4])
 def test_glsl_lighting_matches_the_numpy_reference_on_one_gbuffer(extra_lights):
     """Five lights fit one lighting pass; with more than LIGHTS_PER_PASS, a second pass adds the rest."""
     scene = lit_scene(extra_lights)
@@ -415,11 +416,11 @@ def test_each_lighting_pass_compiles_in_its_lights_kinds_and_shadow_maps():
     expected = {"Sun": "sv", "Lamp": "pc", "Spot": "tv", "Panel": "ac", "Bulb": "pn"}
     letters = "".join(expected[name] for name in order)
     assert names == [f"lighting5_{letters}", f"lighting5_composite_{letters}"]
-    slots, composite = raster.shaders.parse_lighting_name(names[1])
-    assert composite and raster.shaders.lighting_name(slots, composite=True) == names[1]
-    assert raster.shaders.parse_lighting_name("lighting2_svpc") is not None
+    slots, composite = lighting_glsl.parse_lighting_name(names[1])
+    assert composite and lighting_glsl.lighting_name(slots, composite=True) == names[1]
+    assert lighting_glsl.parse_lighting_name("lighting2_svpc") is not None
     for bad in ("lighting3_svpc", "lighting0_", "lighting7_" + "sv" * 7, "lighting1_xv", "lighting1_sv_x"):
-        assert raster.shaders.parse_lighting_name(bad) is None, bad
+        assert lighting_glsl.parse_lighting_name(bad) is None, bad
 
 
 def test_a_light_without_shadows_lights_as_the_reference_does():

@@ -6,12 +6,12 @@ context, even in background mode, where llvmpipe serves it on the CPU) or
 (``phrt_addon/frame.py``):
 
 1. ``draw()``: the opaque layer, then the nearest transparent surfaces in front of
-   it, into textures kept by ``engine/gpu_resources.py``; a resolve pass writes the
+   it, into textures kept by ``engine/gpu/resources.py``; a resolve pass writes the
    front element id and the front normal and depth, which are read back (the
    selection's A, P, D and the Normal and Depth passes).  Shadow maps are rendered
    only when their light or the geometry changed and stay on the GPU.
 2. ``gbuffer()``: the full layers read back, only when rays will be traced.
-3. ``shade(traced)``: full-screen lighting passes of up to ``shaders.LIGHTS_PER_PASS``
+3. ``shade(traced)``: full-screen lighting passes of up to ``lighting_glsl.LIGHTS_PER_PASS``
    lights per layer (shadow-map lookup, or the traced visibility where the tracer
    replaced it; the transparent layer's passes only under its mask), then the
    composite (ambient, reflections, transparency, traced reflections and
@@ -26,19 +26,19 @@ import time
 
 import numpy as np
 
-from ..phrt_addon import draw_chunks, rules, shading
-from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
-from ..phrt_addon.scene import SceneSnapshot
-from ..phrt_addon.shadowmap import ShadowMap, light_views
-from . import shaders
-from . import session
-from .gpu_resources import GPUResources, ShadowAtlas, gpu_module
+from ...phrt_addon import draw_chunks, rules, shading
+from ...phrt_addon.gbuffer import GBuffer, GBufferLayer
+from ...phrt_addon.scene import SceneSnapshot
+from ...phrt_addon.shadowmap import ShadowMap, light_views
+from .. import session
+from . import lighting_glsl
+from .resources import GPUResources, ShadowAtlas, gpu_module
 
 # Material indices are stored +1 in the float position target's w: exact to 2^24.
 MAX_MATERIALS = (1 << 24) - 1
 
 
-# shaders.LIGHT_STRUCT: 6 view-projections, 6 axes, 6 vec4s.
+# lighting_glsl.LIGHT_STRUCT: 6 view-projections, 6 axes, 6 vec4s.
 LIGHT_UBO_FLOATS = 6 * 16 + 6 * 4 + 6 * 4
 
 
@@ -121,7 +121,7 @@ class GPUFrame:
         counts = self._light_counts()
         # All lights in one pass: that pass also composites the opaque layer (one full-screen
         # pass less), if the implementation has the sampler it needs.
-        self._fused = len(counts) == 1 and (shaders.lighting_samplers(counts[0], with_composite=True)
+        self._fused = len(counts) == 1 and (lighting_glsl.lighting_samplers(counts[0], with_composite=True)
                                             <= self.resources.max_fragment_samplers())
         self.targets = self.resources.targets(self.width, self.height)
         self.material_table = self.resources.material_table(self.materials)
@@ -194,29 +194,29 @@ class GPUFrame:
 
     def _light_slots(self) -> list:
         """Per lighting pass, (kind code, map code) of each light: map 0 none, 1 one view, 2
-        cube map (what the pass's shader variant computes, shaders.lighting_name)."""
-        per_pass, lights = shaders.LIGHTS_PER_PASS, self.snapshot.lights
+        cube map (what the pass's shader variant computes, lighting_glsl.lighting_name)."""
+        per_pass, lights = lighting_glsl.LIGHTS_PER_PASS, self.snapshot.lights
         slots = []
         for index, light in enumerate(lights):
             if index % per_pass == 0:
                 slots.append([])
             atlas = self.atlases.get(index) if light.cast_shadows else None
             shadow = 0 if atlas is None else (2 if len(atlas.views) == 6 else 1)
-            slots[-1].append((shaders.LIGHT_KIND_CODES.get(light.kind, 1), shadow))
+            slots[-1].append((lighting_glsl.LIGHT_KIND_CODES.get(light.kind, 1), shadow))
         return slots
 
     def _lighting_shader_names(self) -> list:
-        """The lighting shader of each pass (shaders.lighting_name), and the opaque layer's
+        """The lighting shader of each pass (lighting_glsl.lighting_name), and the opaque layer's
         variant that also composites when there is one pass (``_fused``)."""
         slots = self._light_slots()
-        names = [shaders.lighting_name(per_pass) for per_pass in slots]
+        names = [lighting_glsl.lighting_name(per_pass) for per_pass in slots]
         if self._fused:
-            names.append(shaders.lighting_name(slots[0], composite=True))
+            names.append(lighting_glsl.lighting_name(slots[0], composite=True))
         return names
 
     def _light_counts(self) -> list:
         """Lights per lighting pass (LIGHTS_PER_PASS, the rest in the last)."""
-        per_pass, lights = shaders.LIGHTS_PER_PASS, len(self.snapshot.lights)
+        per_pass, lights = lighting_glsl.LIGHTS_PER_PASS, len(self.snapshot.lights)
         return [min(per_pass, lights - first) for first in range(0, lights, per_pass)]
 
     def shade(self, traced, measure_change: bool = False) -> np.ndarray | None:
@@ -413,8 +413,8 @@ class GPUFrame:
     def _render_atlas(self, gpu, light, bounds, size) -> ShadowAtlas:
         views = light_views(light, bounds, size)
         face = views[0].size
-        columns = min(len(views), shaders.ATLAS_COLUMNS)
-        rows = -(-len(views) // shaders.ATLAS_COLUMNS)
+        columns = min(len(views), lighting_glsl.ATLAS_COLUMNS)
+        rows = -(-len(views) // lighting_glsl.ATLAS_COLUMNS)
         atlas_size = (face * columns, face * rows)
         texture = gpu.types.GPUTexture(atlas_size, format="R32F")
         depth = gpu.types.GPUTexture(atlas_size, format="DEPTH_COMPONENT32F")
@@ -429,7 +429,7 @@ class GPUFrame:
             gpu.state.blend_set("NONE")
             shader.bind()
             for tile, view in enumerate(views):
-                column, row = tile % shaders.ATLAS_COLUMNS, tile // shaders.ATLAS_COLUMNS
+                column, row = tile % lighting_glsl.ATLAS_COLUMNS, tile // lighting_glsl.ATLAS_COLUMNS
                 gpu.state.viewport_set(column * face, row * face, face, face)
                 ubo = _ubo(gpu, np.r_[np.asarray(_matrix_list(view.view_proj_relative), np.float32),
                                       view.view[2, :3].astype(np.float32), np.float32(0.0)])
@@ -459,7 +459,7 @@ class GPUFrame:
             texels = np.asarray(buffer, dtype=np.float32).reshape(height, width)
             maps = []
             for tile, view in enumerate(atlas.views):
-                column, row = tile % shaders.ATLAS_COLUMNS, tile // shaders.ATLAS_COLUMNS
+                column, row = tile % lighting_glsl.ATLAS_COLUMNS, tile // lighting_glsl.ATLAS_COLUMNS
                 face = atlas.face_size
                 maps.append(ShadowMap.from_linear(view, texels[row * face:(row + 1) * face,
                                                                column * face:(column + 1) * face]))
@@ -509,7 +509,7 @@ class GPUFrame:
                 values[96 + face * 4:96 + face * 4 + 3] = view.view[2, :3]
         tail = values[120:]
         tail[0:3] = light.color
-        tail[3] = shaders.LIGHT_KIND_CODES.get(light.kind, 1)
+        tail[3] = lighting_glsl.LIGHT_KIND_CODES.get(light.kind, 1)
         tail[4:7] = np.asarray(light.position, np.float64) - camera_position
         tail[7] = max(float(light.radius), 1e-3)
         tail[8:11] = shading.normalize(np.asarray(light.direction, dtype=np.float64))
@@ -557,7 +557,7 @@ class GPUFrame:
         camera_ubo = self._camera_ubo(gpu, self._traced_flags)
         no_shadow_map = self.resources.placeholder(-1.0)
         no_visibility, empty = targets["no_visibility"], targets["no_radiance"]
-        per_pass = shaders.LIGHTS_PER_PASS
+        per_pass = lighting_glsl.LIGHTS_PER_PASS
         groups = []  # (shader, its batch, the lights' UBO, light indices) per pass
         for first, name in zip(range(0, len(lights), per_pass), self._lighting_names):
             indices = range(first, min(first + per_pass, len(lights)))

@@ -2,7 +2,7 @@
 
 Every shader is built from a ``GPUShaderCreateInfo`` (Blender 5.0 removed the
 source-string constructor) and created once per process by
-``engine/gpu_resources.py``.
+``engine/gpu/resources.py``.
 
 The lighting and composite shaders implement the surface response of
 ``phrt_addon/shading.py`` (Lambert + GGX/Smith/Schlick, the uniform-environment
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import re
 
-from ..phrt_addon import rules
+from ...phrt_addon import rules
 
 # Materials are stored in a float texture, MATERIAL_TABLE_WIDTH per row pair:
 # row 2k: (transmission, ior, alpha, 0); row 2k+1: (emission rgb, 0).

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..phrt_addon import draw_chunks, rules
-from . import shaders
+from ...phrt_addon import draw_chunks, rules
+from . import lighting_glsl
 
 def gpu_module():
     import gpu  # only inside render()/view_draw(): drawing is unavailable at module level in background mode
@@ -120,22 +120,22 @@ class GPUResources:
     def shader(self, name: str):
         shader = self._shaders.get(name)
         if shader is None:
-            from ..phrt_addon.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
+            from ...phrt_addon.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
             gpu = gpu_module()
             builders = {
-                "gbuffer": lambda: shaders.build_gbuffer(gpu),
-                "gbuffer_untextured": lambda: shaders.build_gbuffer(gpu, textured=False),
-                "shadow": lambda: shaders.build_shadow(gpu),
-                "resolve": lambda: shaders.build_resolve(gpu),
-                "composite": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
-                "composite_opaque": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS,
+                "gbuffer": lambda: lighting_glsl.build_gbuffer(gpu),
+                "gbuffer_untextured": lambda: lighting_glsl.build_gbuffer(gpu, textured=False),
+                "shadow": lambda: lighting_glsl.build_shadow(gpu),
+                "resolve": lambda: lighting_glsl.build_resolve(gpu),
+                "composite": lambda: lighting_glsl.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
+                "composite_opaque": lambda: lighting_glsl.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS,
                                                                     with_transparent=False),
             }
-            # "lighting<n>[_composite]_<slots>": n lights added per pass (shaders.lighting_name)
-            lighting = shaders.parse_lighting_name(name)
+            # "lighting<n>[_composite]_<slots>": n lights added per pass (lighting_glsl.lighting_name)
+            lighting = lighting_glsl.parse_lighting_name(name)
             if lighting is not None:
                 slots, composite = lighting
-                builders[name] = lambda: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS, slots,
+                builders[name] = lambda: lighting_glsl.build_lighting(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS, slots,
                                                                 with_composite=composite)
             shader = self._shaders[name] = builders[name]()
             self.created["shader"] += 1
@@ -227,11 +227,11 @@ class GPUResources:
     def material_table(self, table):
         """The per-material optical terms the lighting passes read (shading.MaterialTable)."""
         count = len(table.ior)
-        width = min(count, shaders.MATERIAL_TABLE_WIDTH)
-        bands = -(-count // shaders.MATERIAL_TABLE_WIDTH)
+        width = min(count, lighting_glsl.MATERIAL_TABLE_WIDTH)
+        bands = -(-count // lighting_glsl.MATERIAL_TABLE_WIDTH)
         texels = np.zeros((bands * 2, width, 4), np.float32)
         index = np.arange(count)
-        column, band = index % shaders.MATERIAL_TABLE_WIDTH, index // shaders.MATERIAL_TABLE_WIDTH
+        column, band = index % lighting_glsl.MATERIAL_TABLE_WIDTH, index // lighting_glsl.MATERIAL_TABLE_WIDTH
         texels[band * 2, column, 0] = table.transmission
         texels[band * 2, column, 1] = table.ior
         texels[band * 2, column, 2] = table.alpha
