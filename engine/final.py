@@ -1,6 +1,6 @@
 """Final (F12 / animation / background) rendering of a PHRT frame.
 
-depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``raster``)
+depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``gpu.frame``)
 -> selection, trace, composite (``phrt_addon.frame``) -> render result passes,
 and, when a replay session is active, the run logs.
 
