@@ -13,7 +13,7 @@ from .surface_glsl import SURFACE_LIB
 FULL, OPAQUE = "composite", "composite_opaque"
 
 COMPOSITE_FRAG = """
-// numpy twin: phrt_addon/lighting.py ReferenceRaster.shade (the composite of both layers)
+// numpy twin: phrt_addon/raster/reference_raster.py ReferenceRaster.shade (the composite of both layers)
 /* The pixel's colour with the traced terms (``use_traced``) or the raster ones.  The variant
    WITH_TRANSPARENT 0 shades the opaque layer only: it is drawn over the whole frame, and the
    full variant then only where the transparent layer covers the pixel (depth-tested against
@@ -41,7 +41,7 @@ vec3 composite_pixel(ivec2 pixel, Surface opaque, Surface transparent, bool use_
   return finite_radiance(image);
 }
 
-// numpy twin: phrt_addon/lighting.py ReferenceRaster.shade (with measure_change: the traced change)
+// numpy twin: phrt_addon/raster/reference_raster.py ReferenceRaster.shade (with measure_change: the traced change)
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
   Surface opaque = read_surface(texelFetch(opaque_position, pixel, 0), texelFetch(opaque_normal, pixel, 0),

@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import time
 
-from ...phrt_addon import rules, shading
-from ...phrt_addon.gbuffer import GBuffer
-from ...phrt_addon.scene import SceneSnapshot
+from ...phrt_addon.scene import rules, shading
+from ...phrt_addon.raster.gbuffer import GBuffer
+from ...phrt_addon.scene.snapshot import SceneSnapshot
 from .. import session
 from . import composite, gbuffer, lighting, readback, shadow_maps, traced_textures
 from .resources import GPUResources, gpu_module

@@ -2,7 +2,7 @@
 whole frame that reads the G-buffer layers, its create-info and its draw."""
 from __future__ import annotations
 
-from ...phrt_addon.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
+from ...phrt_addon.raster.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
 from .shadow_maps import ATLAS_COLUMNS
 from .surface_glsl import MATERIAL_TABLE_WIDTH
 
@@ -16,7 +16,7 @@ void main() {
 
 def define_constants(info):
     """The constants the lighting and composite GLSL is compiled with: the material table's
-    layout, the shadow atlas's and the shadow lookup's offsets (``phrt_addon/shadowmap.py``)."""
+    layout, the shadow atlas's and the shadow lookup's offsets (``phrt_addon/raster/shadowmap.py``)."""
     info.define("MATERIAL_TABLE_WIDTH", str(MATERIAL_TABLE_WIDTH))
     info.define("ATLAS_COLUMNS", str(ATLAS_COLUMNS))
     info.define("NORMAL_OFFSET_TEXELS", repr(float(NORMAL_OFFSET_TEXELS)))

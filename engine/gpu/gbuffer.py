@@ -2,20 +2,21 @@
 the resolve that writes the front element, normal and depth (read back for the selection's A,
 P, D and the Normal and Depth passes) and the transparent layer's mask.
 
-Chunks of a mesh wholly outside the view are not drawn (``phrt_addon/draw_chunks.py``: one
+Chunks of a mesh wholly outside the view are not drawn (``phrt_addon/raster/draw_chunks.py``: one
 test per mesh and frame).  The layout of the targets is ``surface_glsl``'s.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ...phrt_addon import draw_chunks, rules
+from ...phrt_addon.raster import draw_chunks
+from ...phrt_addon.scene import rules
 from . import fullscreen, readback, uniforms
 
 TEXTURED, UNTEXTURED, RESOLVE = "gbuffer", "gbuffer_untextured", "resolve"
 
 GBUFFER_VERT = """
-// numpy twin: phrt_addon/gbuffer.py GBufferLayer (position relative to the camera, as the tracer's hits)
+// numpy twin: phrt_addon/raster/gbuffer.py GBufferLayer (position relative to the camera, as the tracer's hits)
 void main() {
   vec4 world = model * vec4(pos, 1.0);
   v_position = world.xyz;
@@ -26,7 +27,7 @@ void main() {
 """
 
 GBUFFER_FRAG = rules.GLSL_SAMPLE_TEXTURE + """
-// numpy twin: phrt_addon/gbuffer.py GBufferLayer (what one layer holds per pixel)
+// numpy twin: phrt_addon/raster/gbuffer.py GBufferLayer (what one layer holds per pixel)
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) { n = -n; }
@@ -47,7 +48,7 @@ void main() {
 """
 
 RESOLVE_FRAG = """
-// numpy twin: phrt_addon/gbuffer.py GBuffer.front_element (and front_normal, view_depth)
+// numpy twin: phrt_addon/raster/gbuffer.py GBuffer.front_element (and front_normal, view_depth)
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
   vec4 opaque = texelFetch(opaque_position, pixel, 0);

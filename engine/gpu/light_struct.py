@@ -1,7 +1,7 @@
 """The lights a lighting pass reads: ``LIGHT`` is the one table behind both the GLSL ``LightData``
 struct (``light_set_glsl``) and ``pack()``, its floats for one light (no offset written by hand).
 
-The light's maths is the numpy shading's (``phrt_addon/lights.py``: the kind code, the spot
+The light's maths is the numpy shading's (``phrt_addon/scene/lights.py``: the kind code, the spot
 cone, the soft-radius floor); positions are relative to the camera, the shadow views relative
 to their own origin, as the G-buffer's positions are.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...phrt_addon import lights, shading
+from ...phrt_addon.scene import lights, shading
 from .uniforms import Field, Packed, column_major, glsl
 
 # A light's shadow views: six cube faces (point, area) or one (sun, spot).

@@ -14,7 +14,7 @@ import enum
 
 import numpy as np
 
-from ...phrt_addon import lights as light_kinds
+from ...phrt_addon.scene import lights as light_kinds
 from . import fullscreen, light_struct, uniforms
 from .lighting_glsl import LIGHTING_FRAG
 from .surface_glsl import SURFACE_LIB

@@ -2,12 +2,12 @@
 (or the tracer's visibility where it replaced it) and the BRDF of ``surface_glsl``; summed over
 the pass's lights into the layer's light target.  ``lighting.build`` puts it together, with
 one ``light_layer()`` call per light slot (``PHRT_ADD_LIGHTS``) and the kind and map codes
-(``LIGHT_*``: ``phrt_addon/lights.py LightKind``; ``MAP_*``: ``lighting.MapKind``) defined."""
+(``LIGHT_*``: ``phrt_addon/scene/lights.py LightKind``; ``MAP_*``: ``lighting.MapKind``) defined."""
 
 LIGHTING_FRAG = """
 /* llvmpipe runs both sides of every branch for every pixel, with mask bookkeeping on top:
    the per-pixel code below chooses with selects rather than branches and early returns. */
-// numpy twin: phrt_addon/shadowmap.py cube_face_view
+// numpy twin: phrt_addon/raster/shadowmap.py cube_face_view
 /* A point relative to a cube map's centre in the view of the face that sees it: (right, up,
    forward) coordinates, the face's view being a signed permutation of the axes
    (shadowmap.cube_face_view, tested against the faces' matrices): selects, no indexing.
@@ -25,7 +25,7 @@ vec3 cube_face_view(vec3 p, out vec2 tile) {
   return x_major ? vec3(-s * p.y, p.z, s * p.x) : (y_major ? vec3(s * p.x, p.z, s * p.y) : vec3(-s * p.x, p.y, s * p.z));
 }
 
-// numpy twin: phrt_addon/shadowmap.py shadow_visibility
+// numpy twin: phrt_addon/raster/shadowmap.py shadow_visibility
 /* Lit fraction of a camera-relative point: shadowmap.py's lookup (normal offset, 2x2 PCF
    on linear light-space depth, one gather).  ``cube`` (a constant of the variant): a cube
    map, whose face is chosen from the offset point.  Only view 0's matrix is read (a uniform
@@ -70,7 +70,7 @@ float shadow_lit(int i, bool cube, sampler2D shadow_map, vec3 position, vec3 nor
   return inside ? mix(mix(lit.w, lit.z, f.x), mix(lit.x, lit.y, f.x), f.y) : 1.0;
 }
 
-// numpy twin: phrt_addon/shading.py light_incidence
+// numpy twin: phrt_addon/scene/shading.py light_incidence
 /* shading.light_incidence: direction to the light and irradiance before shadows and cosine. */
 vec3 incidence(int i, int kind, vec3 position, out vec3 direction) {
   vec3 color = lights.light[i].color_kind.rgb;
@@ -91,7 +91,7 @@ vec3 incidence(int i, int kind, vec3 position, out vec3 direction) {
   return sun ? color : color * (intensity / (dist * dist + radius * radius));
 }
 
-// numpy twin: phrt_addon/lighting.py ReferenceRaster.shade (one light's term at one layer)
+// numpy twin: phrt_addon/raster/reference_raster.py ReferenceRaster.shade (one light's term at one layer)
 /* One light at one layer's surface; with ``measure_change`` where the tracer replaced the
    shadow map, ``change`` gains the luminance of what that changed (the error-aware relevance). */
 vec3 light_layer(int i, int kind, int map, sampler2D shadow_map, Surface s, float traced_visibility,
@@ -107,7 +107,7 @@ vec3 light_layer(int i, int kind, int map, sampler2D shadow_map, Surface s, floa
   return unshadowed * (traced ? traced_visibility : mapped);
 }
 
-// numpy twin: phrt_addon/lighting.py ReferenceRaster.shade (a layer's lights, and the opaque composite)
+// numpy twin: phrt_addon/raster/reference_raster.py ReferenceRaster.shade (a layer's lights, and the opaque composite)
 /* One layer and up to LIGHTS_PER_PASS lights per pass (a variant per count: llvmpipe runs
    every branch for every pixel, so a light slot that is not used must not be compiled).
    The transparent layer's passes are drawn only where it covers the pixel (depth-tested

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...phrt_addon.gbuffer import GBuffer, GBufferLayer
+from ...phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
 
 
 def read(gpu, framebuffer, slot, kind, channels, width, height) -> np.ndarray:

@@ -32,7 +32,8 @@ from collections import Counter
 
 import numpy as np
 
-from ...phrt_addon import draw_chunks, rules
+from ...phrt_addon.raster import draw_chunks
+from ...phrt_addon.scene import rules
 from .surface_glsl import MATERIAL_TABLE_WIDTH
 
 

@@ -2,7 +2,7 @@
 
 A light's maps are drawn only when the light or what its maps see changed (``shadow_key``);
 ``resources.GPUResources`` keeps them across frames.  Each texel holds the linear light-space
-depth (R32F), the depth ``phrt_addon/shadowmap.py`` looks up (its views come from
+depth (R32F), the depth ``phrt_addon/raster/shadowmap.py`` looks up (its views come from
 ``shadowmap.light_views``); the lighting pass's ``shadow_lit`` is that lookup in GLSL.
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...phrt_addon import rules
-from ...phrt_addon.shadowmap import ShadowMap, light_views
+from ...phrt_addon.scene import rules
+from ...phrt_addon.raster.shadowmap import ShadowMap, light_views
 from . import uniforms
 
 # Cube-map shadow atlases hold the six faces in a 3 x 2 grid of tiles.
@@ -22,7 +22,7 @@ ATLAS_COLUMNS = 3
 SHADER = "shadow"
 
 SHADOW_VERT = """
-// numpy twin: phrt_addon/shadowmap.py light_views (each view's view_proj_relative and axis)
+// numpy twin: phrt_addon/raster/shadowmap.py light_views (each view's view_proj_relative and axis)
 void main() {
   vec4 world = model * vec4(pos, 1.0);
   v_axis_depth = -dot(world.xyz, frame.axis.xyz);
@@ -31,7 +31,7 @@ void main() {
 """
 
 SHADOW_FRAG = """
-// numpy twin: phrt_addon/shadowmap.py ShadowMap (linear: the light-space depth per texel)
+// numpy twin: phrt_addon/raster/shadowmap.py ShadowMap (linear: the light-space depth per texel)
 void main() {
   out_depth = v_axis_depth;
 }

@@ -1,5 +1,5 @@
 """GLSL shared by the lighting and composite passes: a G-buffer pixel read as a surface and its
-response to light and environment, ``phrt_addon/shading.py`` line for line (Lambert +
+response to light and environment, ``phrt_addon/scene/shading.py`` line for line (Lambert +
 GGX/Smith/Schlick, the uniform-environment ambient, exact dielectric Fresnel).  Each function
 names its numpy twin; ``tests/integration/test_gpu_frame.py`` renders one G-buffer through both.
 
@@ -40,19 +40,19 @@ struct Surface {
   float n_dot_v;
 };
 
-// numpy twin: phrt_addon/shading.py MaterialTable (packed by resources.GPUResources.material_table)
+// numpy twin: phrt_addon/scene/shading.py MaterialTable (packed by resources.GPUResources.material_table)
 vec4 material_row(int index, int row) {
   ivec2 texel = ivec2(index % MATERIAL_TABLE_WIDTH, (index / MATERIAL_TABLE_WIDTH) * 2 + row);
   return texelFetch(material_table, texel, 0);
 }
 
-// numpy twin: phrt_addon/shading.py f0_dielectric
+// numpy twin: phrt_addon/scene/shading.py f0_dielectric
 float f0_dielectric(float ior) {
   float r = (ior - 1.0) / (ior + 1.0);
   return r * r;
 }
 
-// numpy twin: phrt_addon/shading.py SurfaceSamples (as phrt_addon/lighting.py ReferenceRaster builds it)
+// numpy twin: phrt_addon/scene/shading.py SurfaceSamples (as phrt_addon/raster/reference_raster.py ReferenceRaster builds it)
 Surface read_surface(vec4 position_material, vec4 normal_roughness, vec4 albedo_metallic) {
   Surface s;
   s.covered = position_material.w > 0.5;
@@ -82,20 +82,20 @@ Surface read_surface(vec4 position_material, vec4 normal_roughness, vec4 albedo_
   return s;
 }
 
-// numpy twin: phrt_addon/shading.py specular_f90
+// numpy twin: phrt_addon/scene/shading.py specular_f90
 /* Reflectance at grazing incidence: 1, fading to 0 for a surface with almost no specular
    reflection (F0 below 2%: an IOR-1 surface reflects nothing, not a bright rim). */
 float specular_f90(vec3 f0) {
   return clamp(50.0 * (f0.r + f0.g + f0.b) / 3.0, 0.0, 1.0);
 }
 
-// numpy twin: phrt_addon/shading.py fresnel_schlick
+// numpy twin: phrt_addon/scene/shading.py fresnel_schlick
 vec3 fresnel_schlick(vec3 f0, float cos_theta) {
   float m = 1.0 - clamp(cos_theta, 0.0, 1.0);
   return f0 + (specular_f90(f0) - f0) * (m * m * m * m * m);
 }
 
-// numpy twin: phrt_addon/shading.py fresnel_dielectric
+// numpy twin: phrt_addon/scene/shading.py fresnel_dielectric
 float fresnel_dielectric(float cos_incident, float eta) {
   float cos_i = clamp(abs(cos_incident), 0.0, 1.0);
   float sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
@@ -107,7 +107,7 @@ float fresnel_dielectric(float cos_incident, float eta) {
   return 0.5 * (rs * rs + rp * rp);
 }
 
-// numpy twin: phrt_addon/shading.py brdf_cosine
+// numpy twin: phrt_addon/scene/shading.py brdf_cosine
 vec3 brdf_cosine(Surface s, vec3 l) {
   float cosine = dot(s.normal, l);
   float n_dot_l = clamp(cosine, 0.0, 1.0);
@@ -125,7 +125,7 @@ vec3 brdf_cosine(Surface s, vec3 l) {
   return cosine > 0.0 ? (s.diffuse_color * (1.0 - f) + f * specular) * n_dot_l : vec3(0.0);
 }
 
-// numpy twin: phrt_addon/lighting.py ReferenceRaster.shade (one layer's colour; shading.py ambient)
+// numpy twin: phrt_addon/raster/reference_raster.py ReferenceRaster.shade (one layer's colour; shading.py ambient)
 /* The layer's colour: emission, the accumulated lights, ambient diffuse and the reflection
    (the uniform environment, or the traced radiance where a ray was traced). */
 vec3 shade_layer(Surface s, vec3 light_sum, vec4 traced_reflection, out float transmissive, out float fresnel_t) {
@@ -141,7 +141,7 @@ vec3 shade_layer(Surface s, vec3 light_sum, vec4 traced_reflection, out float tr
   return color + reflect_weight * reflected;
 }
 
-// numpy twin: phrt_addon/shading.py finite
+// numpy twin: phrt_addon/scene/shading.py finite
 vec3 finite_radiance(vec3 c) {
   bvec3 bad = isnan(c);
   c = vec3(bad.x ? 0.0 : c.x, bad.y ? 0.0 : c.y, bad.z ? 0.0 : c.z);

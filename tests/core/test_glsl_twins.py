@@ -75,16 +75,16 @@ def test_every_glsl_function_of_the_gpu_frame_names_a_numpy_twin_that_exists():
 
 def test_a_function_without_a_twin_or_with_a_missing_one_is_found():
     source = """
-// numpy twin: phrt_addon/shading.py fresnel_schlick
+// numpy twin: phrt_addon/scene/shading.py fresnel_schlick
 vec3 fresnel(vec3 f0, float c) { return f0; }
 float bare(float x) { return x; }
-// numpy twin: phrt_addon/shading.py no_such_function
+// numpy twin: phrt_addon/scene/shading.py no_such_function
 float gone(float x) { return x; }
 // numpy twin: phrt_addon/nowhere.py anything
 void main() {
 // numpy twin: none
 float unexplained() { return 0.0; }
-// numpy twin: phrt_addon/lighting.py ReferenceRaster.shade (the sum)
+// numpy twin: phrt_addon/raster/reference_raster.py ReferenceRaster.shade (the sum)
 vec3 method(int i) { return vec3(0.0); }
 """
     assert [name for name, _ in twin_problems(source)] == ["bare", "gone", "main", "unexplained"]

@@ -1,10 +1,10 @@
-"""phrt_addon/lights.py: the light kinds, the spot cone and the soft radius that the numpy
+"""phrt_addon/scene/lights.py: the light kinds, the spot cone and the soft radius that the numpy
 shading and the GPU light packing share."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import lights, shading
-from phrt.phrt_addon.scene import Light
+from phrt.phrt_addon.scene import lights, shading
+from phrt.phrt_addon.scene.snapshot import Light
 
 
 def test_each_blender_light_type_has_its_code_and_an_unknown_type_lights_as_a_point():

@@ -1,7 +1,7 @@
 """The GPU-resident raster half (engine/gpu/: the frame, its passes and their resources).
 
 - Parity: one G-buffer shaded by the GLSL passes and by the numpy reference
-  (phrt_addon/lighting.py, the equations of shading.py and shadowmap.py) agrees within
+  (phrt_addon/raster/reference_raster.py, the equations of shading.py and shadowmap.py) agrees within
   1e-3 relative on lit pixels, with and without traced results.
 - Lifetimes: a static replay creates no GPU resource after its first frame; a moved
   object re-uploads nothing, an edited mesh only itself, a moved light only its own
@@ -26,9 +26,9 @@ from phrt.engine import extract, final, session  # noqa: E402
 from phrt.engine.gpu import lighting, traced_textures  # noqa: E402
 from phrt.engine.gpu.frame import GPUFrame  # noqa: E402
 from phrt.engine.gpu.resources import gpu_module  # noqa: E402
-from phrt.phrt_addon import draw_chunks, lighting as reference_lighting  # noqa: E402
-from phrt.phrt_addon.frame import TracedTerms  # noqa: E402
-from phrt.phrt_addon.scene import Element, Material, MeshInstance  # noqa: E402
+from phrt.phrt_addon.frame_types import TracedTerms  # noqa: E402
+from phrt.phrt_addon.raster import draw_chunks, reference_raster  # noqa: E402
+from phrt.phrt_addon.scene.snapshot import Element, Material, MeshInstance  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
 from gpu_probe import run_on_gpu  # noqa: E402
@@ -71,7 +71,7 @@ def gpu_and_reference(scene, traced_for=None):
             layer.metallic = np.ascontiguousarray(albedo[..., 3])
         traced = traced_for(snapshot, gbuffer) if traced_for else None
         gpu_image = frame.shade(traced)
-        reference = reference_lighting.ReferenceRaster(snapshot, gbuffer, frame.read_shadow_maps()).shade(traced)
+        reference = reference_raster.ReferenceRaster(snapshot, gbuffer, frame.read_shadow_maps()).shade(traced)
         return gpu_image, reference, gbuffer
     return run_on_gpu(scene, job)
 

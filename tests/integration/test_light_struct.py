@@ -4,7 +4,7 @@ the floats ``pack()`` writes agree field by field, for every light kind.
 The struct text is parsed here on its own (std140 offsets of vec4 and mat4 members), and a
 shader compiled against that text reads every member of every light slot back by name: the
 driver's layout, not the table's, decides what it reads.  Each part then holds what the light
-means (its kind's code, the spot cone and soft radius of phrt_addon/lights.py, its shadow views).
+means (its kind's code, the spot cone and soft radius of phrt_addon/scene/lights.py, its shadow views).
 """
 import math
 import os
@@ -22,7 +22,7 @@ from phrt.engine import extract  # noqa: E402
 from phrt.engine.gpu import fullscreen, light_struct, readback, uniforms  # noqa: E402
 from phrt.engine.gpu.frame import GPUFrame  # noqa: E402
 from phrt.engine.gpu.lighting import LIGHTS_PER_PASS  # noqa: E402
-from phrt.phrt_addon import lights  # noqa: E402
+from phrt.phrt_addon.scene import lights  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
 from gpu_probe import run_on_gpu  # noqa: E402
