@@ -1,7 +1,7 @@
 """Shading: one physically plausible BRDF for raster lighting and ray hits alike.
 
 The frame's deferred lighting runs on the GPU (GLSL twins of these functions in
-``engine/shaders.py``); here the same equations serve the tracer's hits and the
+``engine/gpu/surface_glsl.py`` and ``lighting_glsl.py``); here the same equations serve the tracer's hits and the
 numpy reference raster (``raster/reference_raster.py``) the GLSL is tested
 against, so "raster" and "traced" differ only in visibility and in what the
 specular lobe sees - never in the BRDF.
