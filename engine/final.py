@@ -1,6 +1,6 @@
 """Final (F12 / animation / background) rendering of a PHRT frame.
 
-depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``raster``)
+depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``gpu.frame``)
 -> selection, trace, composite (``phrt_addon.frame``) -> render result passes,
 and, when a replay session is active, the run logs.
 
@@ -21,7 +21,8 @@ import numpy as np
 from ..phrt_addon.frame import FrameRenderer
 from ..phrt_addon.problems import ProblemLog
 from ..phrt_addon.schema import PASS_FIELDS
-from . import extract, raster, session
+from . import extract, session
+from .gpu.frame import GPUFrame
 from .session import last_frame  # noqa: F401 (the UI's accessor, re-exported for scripts and tests)
 
 
@@ -71,8 +72,8 @@ def active_replay():
 
 def rasterize(snapshot):
     """The GPU stage of a frame (needs a GPU context): G-buffer, its resolve read-back, and the
-    shadow maps that are missing.  Returns the drawn ``raster.GPUFrame``."""
-    frame = raster.GPUFrame(snapshot)
+    shadow maps that are missing.  Returns the drawn ``GPUFrame``."""
+    frame = GPUFrame(snapshot)
     frame.draw()
     return frame
 

@@ -5,7 +5,7 @@ replay, so what must survive a frame cannot live on the instance.  As Cycles kee
 ``engine.session``, PHRT keeps one ``EngineSession`` per Blender process (``current()``),
 and every engine instance holds it as ``self.session``:
 
-- ``resources``: the GPU objects (``gpu_resources.GPUResources``);
+- ``resources``: the GPU objects (``gpu.resources.GPUResources``);
 - ``meshes``, ``textures``: what ``extract`` converted, by content (bounded caches);
 - ``renderers``: a ``FrameRenderer`` per scene for F12 renders outside a replay (Embree
   scenes, cost model, last selection);
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 from ..phrt_addon.blas_threads import BlasThreads
 from ..phrt_addon.cache import BoundedCache
-from .gpu_resources import GPUResources
+from .gpu.resources import GPUResources
 
 MESH_CACHE_SIZE = 4096  # converted meshes (triangles, corner normals, UVs), by content
 TEXTURE_CACHE_SIZE = 32  # images read from Blender, linear and prepared (up to 64 MB each)

@@ -2,7 +2,7 @@
 
 Rendered shading (``view_update`` / ``view_draw`` of the engine): the frame is
 rendered through the same stages as a final frame (``extract`` snapshot ->
-``raster`` GPU frame -> ``FrameRenderer`` selection, trace, GLSL lighting and
+``gpu.frame`` GPU frame -> ``FrameRenderer`` selection, trace, GLSL lighting and
 composite), seen from the viewport's view and projection matrices at a reduced
 resolution, then the frame's GPU texture is drawn through Blender's display
 transform.  Every cached GPU resource (shaders, meshes, shadow maps) is reused, so

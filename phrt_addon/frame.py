@@ -6,8 +6,8 @@ paper's S).  ``render()`` takes a snapshot and a ``RasterFrame`` whose G-buffer
 is already drawn, and returns every pass plus the statistics and selection rows
 of the logs.
 
-A ``RasterFrame`` is the raster half: ``engine/raster.GPUFrame`` (GLSL on Blender's
-``gpu`` module) in the engine, ``lighting.ReferenceRaster`` (numpy, the same
+A ``RasterFrame`` is the raster half: ``engine/gpu/frame.GPUFrame`` (GLSL on Blender's
+``gpu`` module) in the engine, ``raster.reference_raster.ReferenceRaster`` (numpy, the same
 equations) in core tests.  It provides the front element ids, view depth and
 normal (read back after the G-buffer), the full layers on request (only when
 rays will be traced), and ``shade(traced)``: deferred lighting and composite,

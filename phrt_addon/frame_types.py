@@ -1,7 +1,7 @@
 """The data that flows between the stages of a frame (docs/DESIGN.md, "Data flow").
 
-- ``RasterFrame``: the raster half as the core sees it (``engine/raster.GPUFrame`` on the
-  GPU, ``lighting.ReferenceRaster`` in numpy);
+- ``RasterFrame``: the raster half as the core sees it (``engine/gpu/frame.GPUFrame`` on the
+  GPU, ``raster.reference_raster.ReferenceRaster`` in numpy);
 - ``LayerPixels``: the covered pixels of one read-back G-buffer layer, for the rays;
 - ``TracedTerms``: what the trace stage computed, which the lighting and composite use
   in place of the raster terms;

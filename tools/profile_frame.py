@@ -11,12 +11,17 @@ Wall > CPU in a step means its thread waited (for llvmpipe's rasterizer threads)
 from __future__ import annotations
 
 import argparse
+import importlib
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
-STEPS = ("draw", "_draw_gbuffer", "_resolve", "gbuffer", "shade", "_light", "_composite")
+# (module of engine/gpu, attribute, label): GPUFrame's protocol methods and the passes they run.
+STEPS = (("frame", "GPUFrame.draw", "draw"), ("gbuffer", "draw", "gbuffer.draw"),
+         ("gbuffer", "resolve", "gbuffer.resolve"), ("frame", "GPUFrame.gbuffer", "gbuffer"),
+         ("frame", "GPUFrame.shade", "shade"), ("lighting", "light", "lighting.light"),
+         ("composite", "composite", "composite"))
 
 
 def main(argv=None):
@@ -27,11 +32,9 @@ def main(argv=None):
     parser.add_argument("--budget-ms", type=float, default=None)
     parser.add_argument("--resolution", default="640x480")
     args = parser.parse_args(argv)
-    from phrt.cli import bench
     from phrt import cli
-    from phrt.engine import raster
-    from phrt.engine.runs import replay
-    from phrt.engine.runs import camera_path
+    from phrt.cli import bench
+    from phrt.engine.runs import camera_path, replay
     timings = {}
 
     def timed(name, function):
@@ -44,8 +47,12 @@ def main(argv=None):
                                                      (time.thread_time() - cpu) * 1000.0))
         return wrapper
 
-    for step in STEPS:
-        setattr(raster.GPUFrame, step, timed(step, getattr(raster.GPUFrame, step)))
+    for module_name, attribute, label in STEPS:
+        owner = importlib.import_module(f"phrt.engine.gpu.{module_name}")
+        *path, name = attribute.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        setattr(owner, name, timed(label, getattr(owner, name)))
     cli._blender()
     import bpy
     label = cli.load_scene(args.scene)
@@ -61,10 +68,10 @@ def main(argv=None):
         rows = bench._frame_rows(result.run_dir)
     print(f"{label} {args.mode.upper()} frames {args.frames} at {width}x{height}: medians over frames 4+ "
           f"(wall / calling-thread CPU ms)")
-    for step in STEPS:
+    for _, _, step in STEPS:
         values = timings.get(step, [])[3:]
         if values:
-            print(f"  {step:>14} {statistics.median(v[0] for v in values):7.1f} / "
+            print(f"  {step:>15} {statistics.median(v[0] for v in values):7.1f} / "
                   f"{statistics.median(v[1] for v in values):6.1f}  ({len(values)} calls)")
     print("run means (frames 2+, one-time work out):", ", ".join(
         f"{key[:-3]} {bench._mean(rows, key):.1f}" for key in

@@ -9,7 +9,7 @@ whose box may reach the view frustum (``boxes_outside``).  Off-screen geometry t
 costs neither vertex shading nor clipping: on atrium/path1 only 32-47% of the
 triangles are in view.
 
-Plain numpy: the GPU side (``engine/gpu_resources.py``) uploads what this returns.
+Plain numpy: the GPU side (``engine/gpu/resources.py``) uploads what this returns.
 """
 from __future__ import annotations
 

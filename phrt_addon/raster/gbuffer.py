@@ -3,7 +3,7 @@
 Two layers, both (h, w) images with row 0 at the bottom (Blender's pixel order):
 ``opaque`` holds the nearest opaque surface, ``transparent`` the nearest
 transparent surface in front of it (glass, water, alpha-blended cards).  The
-raster pass fills them on the GPU (``engine/raster.py``); tests may build them
+raster pass fills them on the GPU (``engine/gpu/gbuffer.py``); tests may build them
 by hand.
 
 Positions are stored relative to ``origin`` (the camera position, float64) so

@@ -2,7 +2,7 @@
 
 ``ReferenceRaster`` is a ``frame.RasterFrame`` built from a ``GBuffer`` (with albedo)
 and numpy shadow maps.  It shades with the functions of ``shading.py`` and the
-lookup of ``shadowmap.py`` - the equations the GLSL of ``engine/shaders.py``
+lookup of ``shadowmap.py`` - the equations the GLSL of ``engine/gpu/`` (each function names its twin here)
 implements - so that:
 
 - ``tests/integration/test_gpu_frame.py`` renders one G-buffer through both and

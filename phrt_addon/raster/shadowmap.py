@@ -1,6 +1,6 @@
 """Raster shadows: light views for shadow maps and their lookup in numpy.
 
-The GPU draws the depth maps (``engine/raster.py``); everything else is here so
+The GPU draws the depth maps (``engine/gpu/shadow_maps.py``); everything else is here so
 it is tested without Blender.  Sun lights get one orthographic view fitted to
 the scene bounds, spot lights one perspective view covering the cone, point and
 area lights six 90-degree cube faces.
@@ -11,7 +11,7 @@ world coordinates do not cost float32 precision on the GPU.
 
 Lookup: 2x2 percentage-closer filtering with a normal offset of 1.5 texels and
 a comparison in linear light-space depth.  The GPU does the same lookup in GLSL
-(``engine/shaders.py``); this numpy version is the reference it is tested against
+(``engine/gpu/lighting_glsl.py`` ``shadow_lit``); this numpy version is the reference it is tested against
 (``phrt_addon/raster/reference_raster.py``).  The result is the raster shadow the
 ray tracer replaces for selected casters (its softness and blockiness are what
 ray traced shadows improve on).
@@ -104,7 +104,7 @@ CUBE_FACES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1
 def cube_face_view(points) -> tuple[np.ndarray, np.ndarray]:
     """(face index into CUBE_FACES, (N, 3) view coordinates (right, up, forward)) of points
     relative to a cube map's centre: each face's view (``look_at`` of its axis) is a signed
-    permutation of the axes, so the GLSL lookup (``engine/shaders.py``, ``cube_face_view``)
+    permutation of the axes, so the GLSL lookup (``engine/gpu/lighting_glsl.py``, ``cube_face_view``)
     computes it with selects instead of reading a matrix per pixel.  Ties go to x, then y
     (as the GLSL)."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)

@@ -53,7 +53,7 @@ MIN_IOR = 1.0
 MAX_IOR = 4.0
 DEFAULT_IOR = 1.5
 MAX_TEXTURE_SIZE = 2048
-# Element ids are stored +1 ("none" = 0) in the G-buffer's 32-bit id target (engine/shaders.py).
+# Element ids are stored +1 ("none" = 0) in the G-buffer's 32-bit id target (engine/gpu/gbuffer.py).
 MAX_ELEMENTS = 0xFFFFFFFF - 1
 
 

@@ -1,7 +1,7 @@
 """Shading: one physically plausible BRDF for raster lighting and ray hits alike.
 
 The frame's deferred lighting runs on the GPU (GLSL twins of these functions in
-``engine/shaders.py``); here the same equations serve the tracer's hits and the
+``engine/gpu/surface_glsl.py`` and ``lighting_glsl.py``); here the same equations serve the tracer's hits and the
 numpy reference raster (``raster/reference_raster.py``) the GLSL is tested
 against, so "raster" and "traced" differ only in visibility and in what the
 specular lobe sees - never in the BRDF.
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import rules
+from . import lights, rules
 
 MIN_ROUGHNESS = 0.04
 INV_PI = 1.0 / np.pi
@@ -196,7 +196,8 @@ def light_incidence(light, position, origin):
     dtype = position.dtype if position.dtype in (np.float32, np.float64) else np.float64
     color = np.asarray(light.color, dtype=np.float64).astype(dtype)
     n = len(position)
-    if light.kind == "SUN":
+    kind = lights.kind(light)
+    if kind is lights.LightKind.SUN:
         direction = -normalize(np.asarray(light.direction, dtype=np.float64)).astype(dtype)
         return np.broadcast_to(direction, (n, 3)), np.full(n, np.inf, dtype), np.broadcast_to(color, (n, 3))
     light_position = (np.asarray(light.position, dtype=np.float64) - origin).astype(dtype)
@@ -205,19 +206,17 @@ def light_incidence(light, position, origin):
     safe = np.maximum(distance, 1e-6)
     direction = to_light / safe[:, None]
     axis = normalize(np.asarray(light.direction, dtype=np.float64)).astype(dtype)
-    if light.kind == "AREA":
+    if kind is lights.LightKind.AREA:
         intensity = np.clip(-(direction @ axis), 0.0, 1.0) * INV_PI
     else:
         intensity = np.full(n, 0.25 * INV_PI, dtype)
-        if light.kind == "SPOT":
+        if kind is lights.LightKind.SPOT:
             cos_angle = -(direction @ axis)
-            outer = np.cos(light.spot_size / 2.0)
-            blend = max(float(light.spot_blend), 1e-4)
-            inner = outer + (1.0 - outer) * blend
+            outer, inner = lights.spot_cone(light)
             spot = np.clip((cos_angle - outer) / max(inner - outer, 1e-6), 0.0, 1.0)
             intensity = intensity * spot * spot * (3.0 - 2.0 * spot)
-    # Inverse-square falloff, softened inside a small radius so a light touching a surface stays finite.
-    radius = max(float(light.radius), 1e-3)
+    # Inverse-square falloff, softened inside a small radius (lights.soft_radius).
+    radius = lights.soft_radius(light)
     irradiance = color[None, :] * (intensity / (distance ** 2 + radius ** 2))[:, None]
     return direction, distance, irradiance
 

@@ -24,8 +24,6 @@ import numpy as np
 from .. import defaults, schema
 from . import rules
 
-LIGHT_KINDS = ("POINT", "SUN", "SPOT", "AREA")
-
 
 @dataclass
 class Material:
@@ -127,7 +125,7 @@ class Light:
     watts for POINT/SPOT/AREA (Cycles' convention), W/m^2 (irradiance) for SUN."""
 
     name: str
-    kind: str
+    kind: str  # Blender's light type: "SUN", "POINT", "SPOT", "AREA" (lights.LightKind)
     color: tuple
     position: tuple = (0.0, 0.0, 0.0)
     direction: tuple = (0.0, 0.0, -1.0)  # direction the light travels (the lamp's -Z)

@@ -293,7 +293,7 @@ def test_cube_face_views_are_the_signed_axis_permutations_the_glsl_lookup_comput
         clip = np.c_[points[mine], np.ones(mine.sum())] @ light_view.view_proj_relative.T
         assert np.all(np.abs(clip[:, :2]) <= clip[:, 3:4] * (1 + 1e-12))
         np.testing.assert_allclose(clip[:, 3], view[mine][:, 2], rtol=1e-12)
-        # The GLSL's clip coordinates from view 0's projection terms (engine/shaders.py).
+        # The GLSL's clip coordinates from view 0's projection terms (engine/gpu/lighting_glsl.py shadow_lit).
         first = views[0].view_proj_relative
         np.testing.assert_allclose(-first[0, 1] * view[mine][:, 0], clip[:, 0], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(first[1, 2] * view[mine][:, 1], clip[:, 1], rtol=1e-12, atol=1e-12)

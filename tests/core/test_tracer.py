@@ -547,7 +547,7 @@ def test_ray_epsilon_scales_with_magnitude_and_scene_size():
 # -- raster shadow maps against traced shadows ------------------------------------------------------
 
 def raycast_shadow_maps(snap, light, size):
-    """The depth maps ``engine/raster.py`` draws on the GPU, made by tracing one ray per texel
+    """The depth maps ``engine/gpu/shadow_maps.py`` draws on the GPU, made by tracing one ray per texel
     centre through the same light views (window depth, row 0 at the bottom)."""
     scene = TraceScene(threads=1)
     try:

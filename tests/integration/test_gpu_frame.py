@@ -1,4 +1,4 @@
-"""The GPU-resident raster half (engine/raster.py, engine/gpu_resources.py, engine/shaders.py).
+"""The GPU-resident raster half (engine/gpu/: the frame, its passes and their resources).
 
 - Parity: one G-buffer shaded by the GLSL passes and by the numpy reference
   (phrt_addon/raster/reference_raster.py, the equations of shading.py and shadowmap.py) agrees within
@@ -22,9 +22,12 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 import bmesh  # noqa: E402
 
-from phrt.engine import extract, final, raster, session  # noqa: E402
-from phrt.phrt_addon.raster import reference_raster  # noqa: E402
-from phrt.phrt_addon.frame_types import TracedTerms
+from phrt.engine import extract, final, session  # noqa: E402
+from phrt.engine.gpu import lighting, traced_textures  # noqa: E402
+from phrt.engine.gpu.frame import GPUFrame  # noqa: E402
+from phrt.engine.gpu.resources import gpu_module  # noqa: E402
+from phrt.phrt_addon.frame_types import TracedTerms  # noqa: E402
+from phrt.phrt_addon.raster import draw_chunks, reference_raster  # noqa: E402
 from phrt.phrt_addon.scene.snapshot import Element, Material, MeshInstance  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
@@ -59,7 +62,7 @@ def gpu_and_reference(scene, traced_for=None):
     """(GPU combined, reference combined, lit mask) of the current frame."""
     def job(engine, depsgraph):
         snapshot = extract.extract(depsgraph)
-        frame = raster.GPUFrame(snapshot)
+        frame = GPUFrame(snapshot)
         frame.draw()
         gbuffer = frame.gbuffer()
         opaque_albedo, transparent_albedo = frame.read_albedo()
@@ -86,7 +89,7 @@ def assert_parity(gpu_image, reference, gbuffer):
     assert np.median(relative[lit]) < 1e-4
 
 
-@pytest.mark.parametrize("extra_lights", [0, raster.shaders.LIGHTS_PER_PASS - 4])
+@pytest.mark.parametrize("extra_lights", [0, lighting.LIGHTS_PER_PASS - 4])
 def test_glsl_lighting_matches_the_numpy_reference_on_one_gbuffer(extra_lights):
     """Five lights fit one lighting pass; with more than LIGHTS_PER_PASS, a second pass adds the rest."""
     scene = lit_scene(extra_lights)
@@ -223,7 +226,7 @@ def test_element_ids_hold_32_bits():
         normals = np.tile([[0.0, -1.0, 0.0]], (6, 1)).astype(np.float32)
         snapshot.meshes = [MeshInstance("Quad", np.eye(4), positions, triangles, normals, None,
                                         np.zeros(2, np.int32), np.full(2, index, np.int32))]
-        frame = raster.GPUFrame(snapshot)
+        frame = GPUFrame(snapshot)
         frame.draw()
         return frame.front_element
 
@@ -241,7 +244,7 @@ def test_the_first_draw_of_a_lighting_configuration_is_counted_as_set_up():
         snapshot = extract.extract(depsgraph)
         setups = []
         for measure in (False, False, True, True):
-            frame = raster.GPUFrame(snapshot)
+            frame = GPUFrame(snapshot)
             frame.draw()
             frame.shade(None, measure_change=measure)
             setups.append(frame.stats["shade_setup_ms"])
@@ -261,10 +264,10 @@ def test_the_lighting_pass_that_also_composites_equals_the_separate_composite():
         snapshot = extract.extract(depsgraph)
         results = []
         for fused in (True, False):
-            frame = raster.GPUFrame(snapshot)
+            frame = GPUFrame(snapshot)
             frame.draw()
-            assert frame._fused  # five lights: one pass, with the sampler it needs
-            frame._fused = fused
+            assert frame.fused  # five lights: one pass, with the sampler it needs
+            frame.fused = fused
             gbuffer = frame.gbuffer()
             traced = TracedTerms()
             opaque = np.flatnonzero(gbuffer.opaque.covered.ravel())
@@ -295,9 +298,9 @@ def test_the_lighting_pass_composites_only_when_the_gl_has_the_samplers_for_it()
         images = []
         for available in (15, 14):
             resources._max_fragment_samplers = available
-            frame = raster.GPUFrame(snapshot)
+            frame = GPUFrame(snapshot)
             frame.draw()
-            images.append((frame._fused, frame.shade(None)))
+            images.append((frame.fused, frame.shade(None)))
         resources._max_fragment_samplers = found
         return found, images
 
@@ -316,14 +319,14 @@ def test_what_stands_for_untraced_terms_has_the_traced_textures_size_and_format(
 
     def job(engine, depsgraph):
         snapshot = extract.extract(depsgraph)
-        frame = raster.GPUFrame(snapshot)
+        frame = GPUFrame(snapshot)
         frame.draw()
         gbuffer = frame.gbuffer()
         traced = TracedTerms()
         opaque = np.flatnonzero(gbuffer.opaque.covered.ravel())[:50]
         traced.shadow_visibility[("opaque", 0)] = (opaque, np.zeros(len(opaque), np.float32))
         traced.reflection["opaque"] = (opaque, np.ones((len(opaque), 3)))
-        uploads = frame._upload_traced(raster.gpu_module(), traced)
+        uploads = traced_textures.upload(gpu_module(), frame.resources, traced, frame.width, frame.height)
         describe = lambda texture: (texture.format, texture.width, texture.height)  # noqa: E731
         standins = {name: frame.targets[name] for name in ("no_visibility", "no_radiance")}
         return ({name: describe(texture) for name, texture in standins.items()},
@@ -351,16 +354,16 @@ def test_chunks_outside_the_view_are_not_drawn_and_the_frame_is_the_same():
         snapshot = extract.extract(depsgraph)
         results = []
         for cull in (True, False):
-            original = raster.draw_chunks.boxes_outside
+            original = draw_chunks.boxes_outside
             if not cull:
-                raster.draw_chunks.boxes_outside = lambda matrix, boxes: np.zeros(len(boxes), bool)
+                draw_chunks.boxes_outside = lambda matrix, boxes: np.zeros(len(boxes), bool)
             try:
-                frame = raster.GPUFrame(snapshot)
+                frame = GPUFrame(snapshot)
                 frame.draw()
                 gbuffer = frame.gbuffer()
                 image = frame.shade(None)
             finally:
-                raster.draw_chunks.boxes_outside = original
+                draw_chunks.boxes_outside = original
             results.append((dict(frame.stats), gbuffer, image))
         return results
 
@@ -406,20 +409,15 @@ def test_each_lighting_pass_compiles_in_its_lights_kinds_and_shadow_maps():
     bpy.data.objects["Bulb"].data.use_shadow = False
 
     def job(engine, depsgraph):
-        frame = raster.GPUFrame(extract.extract(depsgraph))
+        frame = GPUFrame(extract.extract(depsgraph))
         frame.draw()
         kinds = {light.name: light.kind for light in frame.snapshot.lights}
-        return frame._lighting_shader_names(), [light.name for light in frame.snapshot.lights], kinds
+        return frame.lighting_names, [light.name for light in frame.snapshot.lights], kinds
 
     names, order, kinds = run_on_gpu(scene, job)
     expected = {"Sun": "sv", "Lamp": "pc", "Spot": "tv", "Panel": "ac", "Bulb": "pn"}
     letters = "".join(expected[name] for name in order)
     assert names == [f"lighting5_{letters}", f"lighting5_composite_{letters}"]
-    slots, composite = raster.shaders.parse_lighting_name(names[1])
-    assert composite and raster.shaders.lighting_name(slots, composite=True) == names[1]
-    assert raster.shaders.parse_lighting_name("lighting2_svpc") is not None
-    for bad in ("lighting3_svpc", "lighting0_", "lighting7_" + "sv" * 7, "lighting1_xv", "lighting1_sv_x"):
-        assert raster.shaders.parse_lighting_name(bad) is None, bad
 
 
 def test_a_light_without_shadows_lights_as_the_reference_does():

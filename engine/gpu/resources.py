@@ -4,7 +4,7 @@ GPU objects created in one ``render()`` are valid in later ones (docs/platform-n
 "GPU module in background mode"), so what a frame needs is created once and kept
 while it stays valid:
 
-- shaders: created on first use, kept for the process;
+- shaders: built on first use by the pass that names them, kept for the process;
 - meshes: a vertex buffer (corners with the same vertex, normal and texture
   coordinate share a vertex) and per (material, element) group a batch per spatial
   chunk with its bounding box, culled against each frame's view (``draw_chunks``);
@@ -13,7 +13,7 @@ while it stays valid:
   and its old ones are dropped at the end of the frame (``retain_meshes``);
 - material textures, keyed by image and size; the material table (a small float
   texture), keyed by its content;
-- shadow maps (``ShadowAtlas``), keyed by their light and the geometry they see: a
+- shadow maps (``shadow_maps.ShadowAtlas``), keyed by their light and the geometry they see: a
   moved light re-renders only its own map;
 - the frame's render targets, keyed by resolution.
 
@@ -29,27 +29,17 @@ from __future__ import annotations
 
 import hashlib
 from collections import Counter
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..phrt_addon.raster import draw_chunks
-from ..phrt_addon.scene import rules
-from . import shaders
+from ...phrt_addon.raster import draw_chunks
+from ...phrt_addon.scene import rules
+from .surface_glsl import MATERIAL_TABLE_WIDTH
+
 
 def gpu_module():
     import gpu  # only inside render()/view_draw(): drawing is unavailable at module level in background mode
     return gpu
-
-
-@dataclass
-class ShadowAtlas:
-    """The shadow maps of one light on the GPU: one view (sun, spot) or six cube faces
-    in a 3 x 2 grid of tiles, each texel the linear light-space depth (R32F)."""
-
-    texture: object
-    views: list  # shadowmap.LightView per tile
-    face_size: int
 
 
 class GPUResources:
@@ -118,27 +108,12 @@ class GPUResources:
         return True
 
     # -- shaders -------------------------------------------------------------
-    def shader(self, name: str):
+    def shader(self, name: str, build):
+        """The shader called ``name``: ``build(gpu)`` (a pass's builder) makes it on first use.
+        A name stands for one source: a variant's name says what its builder compiles in."""
         shader = self._shaders.get(name)
         if shader is None:
-            from ..phrt_addon.raster.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
-            gpu = gpu_module()
-            builders = {
-                "gbuffer": lambda: shaders.build_gbuffer(gpu),
-                "gbuffer_untextured": lambda: shaders.build_gbuffer(gpu, textured=False),
-                "shadow": lambda: shaders.build_shadow(gpu),
-                "resolve": lambda: shaders.build_resolve(gpu),
-                "composite": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS),
-                "composite_opaque": lambda: shaders.build_composite(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS,
-                                                                    with_transparent=False),
-            }
-            # "lighting<n>[_composite]_<slots>": n lights added per pass (shaders.lighting_name)
-            lighting = shaders.parse_lighting_name(name)
-            if lighting is not None:
-                slots, composite = lighting
-                builders[name] = lambda: shaders.build_lighting(gpu, NORMAL_OFFSET_TEXELS, DEPTH_BIAS_TEXELS, slots,
-                                                                with_composite=composite)
-            shader = self._shaders[name] = builders[name]()
+            shader = self._shaders[name] = build(gpu_module())
             self.created["shader"] += 1
         return shader
 
@@ -226,13 +201,14 @@ class GPUResources:
         return texture
 
     def material_table(self, table):
-        """The per-material optical terms the lighting passes read (shading.MaterialTable)."""
+        """The per-material optical terms the lighting passes read (shading.MaterialTable), laid
+        out as ``surface_glsl.material_row`` reads them."""
         count = len(table.ior)
-        width = min(count, shaders.MATERIAL_TABLE_WIDTH)
-        bands = -(-count // shaders.MATERIAL_TABLE_WIDTH)
+        width = min(count, MATERIAL_TABLE_WIDTH)
+        bands = -(-count // MATERIAL_TABLE_WIDTH)
         texels = np.zeros((bands * 2, width, 4), np.float32)
         index = np.arange(count)
-        column, band = index % shaders.MATERIAL_TABLE_WIDTH, index // shaders.MATERIAL_TABLE_WIDTH
+        column, band = index % MATERIAL_TABLE_WIDTH, index // MATERIAL_TABLE_WIDTH
         texels[band * 2, column, 0] = table.transmission
         texels[band * 2, column, 1] = table.ior
         texels[band * 2, column, 2] = table.alpha
@@ -252,7 +228,7 @@ class GPUResources:
     def shadow_atlas(self, key):
         return self._shadows.get(key)
 
-    def put_shadow_atlas(self, key, atlas: ShadowAtlas):
+    def put_shadow_atlas(self, key, atlas):
         if key in self._shadows:
             self.freed["shadow_map"] += 1
         self._shadows[key] = atlas

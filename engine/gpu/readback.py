@@ -1,0 +1,76 @@
+"""Read-back: frame targets into numpy (docs/platform-notes.md: a flat ``gpu.types.Buffer``
+passed to ``read_color`` and a reshape; ``np.asarray`` on a multi-dimensional buffer scrambles
+the pixels), and the G-buffer layers decoded as the core's ``GBufferLayer``."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
+
+
+def read(gpu, framebuffer, slot, kind, channels, width, height) -> np.ndarray:
+    """Colour attachment ``slot`` as (h, w, channels) float32 (``kind`` "FLOAT") or uint32
+    ("UINT"); (h, w) for one channel."""
+    n = width * height * channels
+    buffer = gpu.types.Buffer(kind, n)
+    with framebuffer.bind():
+        framebuffer.read_color(0, 0, width, height, channels, slot, kind, data=buffer)
+    dtype = np.float32 if kind == "FLOAT" else np.uint32
+    shape = (height, width, channels) if channels > 1 else (height, width)
+    # The array keeps the buffer it views alive: no copy.
+    return np.asarray(buffer, dtype=dtype).reshape(shape)
+
+
+def read_target(gpu, frame, name, kind="FLOAT", channels=4) -> np.ndarray:
+    """One of ``frame.targets`` read back whole."""
+    framebuffer = gpu.types.GPUFrameBuffer(color_slots=(frame.targets[name],))
+    return read(gpu, framebuffer, 0, kind, channels, frame.width, frame.height)
+
+
+def read_gbuffer(gpu, frame, transparent_drawn: bool) -> GBuffer:
+    """Both layers of ``frame`` (float32 positions relative to the camera); the transparent one
+    empty when nothing transparent was drawn."""
+    targets, width, height = frame.targets, frame.width, frame.height
+    framebuffer = gpu.types.GPUFrameBuffer(color_slots=(
+        targets["opaque_position"], targets["opaque_normal"], targets["opaque_element"],
+        targets["transparent_position"], targets["transparent_normal"], targets["transparent_element"]))
+
+    def layer(first_slot):
+        position = read(gpu, framebuffer, first_slot, "FLOAT", 4, width, height)
+        normal = read(gpu, framebuffer, first_slot + 1, "FLOAT", 4, width, height)
+        element = read(gpu, framebuffer, first_slot + 2, "UINT", 1, width, height)
+        return decode_layer(position, normal, element)
+
+    opaque = layer(0)
+    transparent = layer(3) if transparent_drawn else GBufferLayer.empty(width, height)
+    return GBuffer(opaque=opaque, transparent=transparent, origin=frame.snapshot.camera.position,
+                   view_depth=frame.view_depth)
+
+
+def read_albedo(gpu, frame) -> tuple:
+    """(opaque, transparent) albedo + metallic, (h, w, 4) (stored as sqrt: squared here)."""
+    framebuffer = gpu.types.GPUFrameBuffer(color_slots=(frame.targets["opaque_albedo"],
+                                                        frame.targets["transparent_albedo"]))
+    result = []
+    for slot in (0, 1):
+        stored = read(gpu, framebuffer, slot, "FLOAT", 4, frame.width, frame.height)
+        stored[..., :3] *= stored[..., :3]  # stored as sqrt
+        result.append(stored)
+    return tuple(result)
+
+
+def decode_layer(position: np.ndarray, normal: np.ndarray, element: np.ndarray) -> GBufferLayer:
+    """The raw read-back targets as a ``GBufferLayer`` (whole-array numpy; no albedo: only the
+    reference lighting reads it, ``read_albedo``).  Cleared pixels read as zeros in every target."""
+    material = np.rint(position[..., 3]).astype(np.int64) - 1
+    covered = material >= 0
+    return GBufferLayer(
+        covered=covered,
+        position=np.ascontiguousarray(position[..., :3]),
+        normal=np.ascontiguousarray(normal[..., :3]),
+        roughness=np.ascontiguousarray(normal[..., 3]),
+        albedo=None,
+        metallic=None,
+        material=material.astype(np.int32),
+        element=element.astype(np.int64) - 1,
+    )
