@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from . import runlog
+from .runs import atomic
 
 ORACLE_DIR = "oracle"
 ORACLE_JSON = "oracle.json"
@@ -193,13 +194,11 @@ def _joined(names) -> str:
 def write_csv(path, columns, rows):
     """Rows (dicts) as a CSV through a temporary file (numbers as in the run logs)."""
     path = Path(path)
-    temporary = path.with_name(path.name + ".tmp")
-    with open(temporary, "w", newline="", encoding="utf-8") as handle:
+    with atomic.atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(columns)
         for row in rows:
             writer.writerow([runlog.format_value(row.get(key)) for key in columns])
-    os.replace(temporary, path)
 
 
 def read_csv(path) -> list:

@@ -8,11 +8,17 @@ A RUN_DIR (docs/formats.md) holds
 - ``summary.json``: statistics of the run, the versions and the machine.
 
 :class:`RunLog` writes them one frame at a time and flushes both CSVs after
-every frame, so a cancelled or crashed replay still leaves complete rows for
-the frames it finished.  ``frames.csv`` is the commit record: a frame's
-selection rows are written and flushed before its frame row, and
-:func:`read_selection` ignores selection rows of frames absent from
-``frames.csv`` (a replay killed half way through writing a frame).
+every frame.  Given the run's facts when it opens (``facts``), it writes
+``summary.json`` at once with ``"partial": true`` and ``frame_count`` 0, and
+rewrites it as frames complete (at most once a second, and once a frame when
+frames take longer: whichever is rarer), then a last time at :meth:`close`.
+``summary.json`` is the commit record: the readers (``run_files.py``) read the
+first ``frame_count`` rows of ``frames.csv``, the selection rows of those frames
+and their images only, so a run killed at any moment (SIGKILL, a power cut)
+reads back consistently: the frames done when the summary was last written.
+A frame's image is renamed into place before its rows are written, and its
+selection rows before its frame row.  Every ``summary.json`` is written under a
+temporary name with this host and pid (``runs/atomic.py``) and renamed.
 
 No NaN or Inf reaches a log: a non-finite number is written as an empty cell
 (read back as ``None``) and counted in ``summary.json`` under
@@ -27,11 +33,13 @@ import logging
 import math
 import os
 import platform
+import time
 from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
 
+from .runs import atomic
 from .run_files import (frame_image_path, image_is_complete, output_dir_problem, read_frames, read_selection,
                         read_summary)
 from .schema import (BOOL_COLUMNS, FRAME_COLUMNS, FRAMES_CSV, FRAMES_DIR, REASONS, SELECTION_COLUMNS,
@@ -49,6 +57,7 @@ log = logging.getLogger(__name__)
 # Keys of summary.json the caller must pass to close() (the rest is computed).
 SUMMARY_REQUIRED_KEYS = ("scene", "path", "resolution", "blender_version", "embreex_version")
 SIGNIFICANT_DIGITS = 6
+SUMMARY_EVERY_S = 1.0  # the partial summary is rewritten at most this often
 
 
 def format_value(value):
@@ -196,12 +205,11 @@ class RunLog:
     from the keys of the first row.  Existing logs in ``run_dir`` are replaced.
     """
 
-    def __init__(self, run_dir, extra_frame_columns=None, extra_selection_columns=None):
+    def __init__(self, run_dir, extra_frame_columns=None, extra_selection_columns=None, facts=None,
+                 summary_every_s=SUMMARY_EVERY_S, clock=time.monotonic):
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        summary = self.run_dir / SUMMARY_JSON
-        if summary.exists():
-            summary.unlink()
+        (self.run_dir / SUMMARY_JSON).unlink(missing_ok=True)  # first: the folder stops being a run
         self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
                                     extra_selection_columns)
         self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
@@ -210,6 +218,18 @@ class RunLog:
         self._frame_values = []
         self._selection_states = {}  # element -> (array of frames, bytearray of selected flags)
         self._closed = False
+        self._facts = None if facts is None else dict(facts)
+        self._summary_every_s = float(summary_every_s)
+        self._clock = clock
+        self._summary_written_at = None
+        self.summaries_written = 0
+        if self._facts is not None:
+            self._check_facts(self._facts)
+            if self._frames.extra is not None:
+                self._frames.flush()  # the header now: the columns are known
+            if self._selection.extra is not None:
+                self._selection.flush()
+            self.write_partial_summary()
 
     @property
     def frame_count(self):
@@ -246,6 +266,22 @@ class RunLog:
                 states = self._selection_states[element] = (array("q"), bytearray())
             states[0].append(int(frame))
             states[1].append(1 if row["selected"] else 0)
+        if self._facts is not None and (self._summary_written_at is None
+                                        or self._clock() - self._summary_written_at >= self._summary_every_s):
+            self.write_partial_summary()
+
+    def write_partial_summary(self, extra=None):
+        """Rewrite ``summary.json`` with ``"partial": true`` and the frames logged so far (an
+        ``OSError`` of a full disk is raised; the previous summary then stays)."""
+        if self._facts is None:
+            raise ValueError("RunLog was opened without facts: it has no partial summary to write")
+        self._write_summary({**self._facts, **(extra or {}), "partial": True})
+
+    @staticmethod
+    def _check_facts(facts):
+        missing = [key for key in SUMMARY_REQUIRED_KEYS if key not in facts]
+        if missing:
+            raise ValueError(f"summary.json needs {missing} from the caller")
 
     def close(self, summary_extra):
         """Close both CSVs and write ``summary.json``; returns the summary dict.
@@ -256,34 +292,31 @@ class RunLog:
         """
         if self._closed:
             raise ValueError("RunLog is already closed")
-        missing = [key for key in SUMMARY_REQUIRED_KEYS if key not in summary_extra]
-        if missing:
-            raise ValueError(f"summary.json needs {missing} from the caller")
+        summary_extra = {"partial": False, **(self._facts or {}), **summary_extra}
+        self._check_facts(summary_extra)
         try:
             self._close_files()
         except OSError:
             pass  # a CSV could not take its last bytes (a full disk, reported by the writer): its complete rows stay
+        return self._write_summary(summary_extra)
+
+    def _write_summary(self, summary_extra):
         frame_rows = [dict(zip(FRAME_COLUMNS, values)) for values in self._frame_values]
         selection_states = [{"frame": frame, "element": element, "selected": bool(selected)}
                             for element, (frames, flags) in self._selection_states.items()
                             for frame, selected in zip(frames, flags)]
         first = frame_rows[0] if frame_rows else {}
         summary = {"scene": summary_extra["scene"], "path": summary_extra["path"],
-                   "mode": first.get("mode"), "resolution": summary_extra["resolution"],
-                   "budget_ms": first.get("budget_ms")}
+                   "mode": first.get("mode", summary_extra.get("mode")), "resolution": summary_extra["resolution"],
+                   "budget_ms": first.get("budget_ms", summary_extra.get("budget_ms"))}
         summary.update(summarize(frame_rows, selection_states))
         summary["non_finite_values_dropped"] = self._frames.non_finite + self._selection.non_finite
         summary["machine"] = machine_info()
         summary.update(summary_extra)
         summary = _round_json(_json_safe(summary))
-        path = self.run_dir / SUMMARY_JSON
-        temporary = path.with_suffix(".json.tmp")
-        try:
-            temporary.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-            os.replace(temporary, path)
-        except OSError:
-            temporary.unlink(missing_ok=True)  # no half-written file is left behind
-            raise
+        atomic.write_text(self.run_dir / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        self._summary_written_at = self._clock()
+        self.summaries_written += 1
         return summary
 
     def _close_files(self):

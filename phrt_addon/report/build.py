@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from .. import oracle
+from ..runs import atomic
 from .document import _Table, _sections
 from .markup import _html, _markdown
 from .plots import _plot_error_vs_time, _plot_selection_quality, _plot_timeline
@@ -74,6 +75,6 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
             "Failed jobs", ["Job", "Why"], [[job, message] for job, message in failures],
             "Jobs of the plan that ended without a result (after their retries); the report covers the "
             "others. Running the plan again retries them."))]
-    files.markdown.write_text(_markdown(sections), encoding="utf-8")
-    files.html.write_text(_html(sections), encoding="utf-8")
+    atomic.write_text(files.markdown, _markdown(sections))
+    atomic.write_text(files.html, _html(sections))
     return files

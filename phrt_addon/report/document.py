@@ -70,6 +70,13 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
     items = [("h1", "PHRT report")]
     items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are "
                        f"means over the frames of each run, in milliseconds."))
+    partial = [run for run in runs if run.summary.get("partial")]
+    if partial:
+        items.append(("p", "Partial runs (stopped, killed or failed before their last frame; the report uses the "
+                           "frames their summary.json commits): " + "; ".join(
+                               f"{run.label} ({len(run.frames)} of {run.summary.get('frames_planned', '?')} frames"
+                               f"{': ' + str(run.summary['error']) if run.summary.get('error') else ''})"
+                               for run in partial) + "."))
 
     items.append(("table", _Table(
         "Render times (ms per frame), after the paper's Table II",
@@ -91,7 +98,8 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
                   if budget and total.size and run.mode == "HYBRID" else "–")
         run_rows.append([
             run.label, f"{run.scene} / {run.path}", run.mode.lower(),
-            _number(budget, "g"), str(len(run.frames)), _ms(run.mean("total_ms")),
+            _number(budget, "g"), str(len(run.frames)) + (" (partial)" if run.summary.get("partial") else ""),
+            _ms(run.mean("total_ms")),
             _ms(run.percentile("total_ms", 50)), _ms(run.percentile("total_ms", 95)),
             _ms(float(total.max()) if total.size else None),
             _ms(run.mean("raster_ms")), _ms(run.mean("select_ms")), _ms(run.mean("trace_ms")),
@@ -135,7 +143,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
 
     stability_rows = []
     for run in runs:
-        rates = runlog.flips_per_element_per_100(run.selection)
+        rates = run.selection.flips_per_element_per_100()
         worst = sorted(((rate, element) for element, rate in rates.items() if rate > 0),
                        key=lambda item: (-item[0], item[1]))[:WORST_ELEMENTS]
         values = np.array(list(rates.values()), dtype=float)
@@ -260,7 +268,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                 continue
             per_element = pop.per_element()
             worst = sorted(per_element.items(), key=lambda item: (-item[1][1], item[0]))[:WORST_ELEMENTS]
-            rates = np.array(list(runlog.flips_per_element_per_100(run.selection).values()), dtype=float)
+            rates = np.array(list(run.selection.flips_per_element_per_100().values()), dtype=float)
             pop_rows.append([
                 run.label, run.mode.lower(), str(len(pop.pops)),
                 _number(float(rates.mean()) if rates.size else None, ".2f"),

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import defaults, metrics, runlog
+from .. import defaults, metrics, run_files, runlog
+from ..runs import atomic
 
 
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
@@ -53,7 +54,8 @@ class Run:
     label: str
     summary: dict
     frames: list
-    selection: list
+    selection: run_files.SelectionStates  # streamed from selection.csv once, kept compact
+    images: dict = field(default_factory=dict)  # {frame: path}: only the images the summary commits
 
     @property
     def scene(self):
@@ -101,11 +103,11 @@ class Run:
         return float(np.percentile(values, q)) if values.size else None
 
     def image(self, frame):
-        return runlog.frame_image_path(self.run_dir, frame)
+        return self.images.get(frame)
 
     @property
     def has_images(self):
-        return any(self.image(row["frame"]) is not None for row in self.frames)
+        return bool(self.images)
 
 
 @dataclass
@@ -156,10 +158,11 @@ def load_run(run_dir):
     try:
         summary = runlog.read_summary(run_dir)
     except FileNotFoundError:
-        raise ValueError(f"{run_dir} has no {runlog.SUMMARY_JSON}: the run did not finish; "
-                         f"render it again") from None
-    return Run(run_dir=run_dir, label=run_dir.name, summary=summary,
-               frames=runlog.read_frames(run_dir), selection=runlog.read_selection(run_dir))
+        raise ValueError(f"{run_dir} has no {runlog.SUMMARY_JSON}: it holds no run; render it again") from None
+    except ValueError:
+        raise ValueError(f"{run_dir}/{runlog.SUMMARY_JSON} cannot be read: render the run again") from None
+    return Run(run_dir=run_dir, label=run_dir.name, summary=summary, frames=runlog.read_frames(run_dir, summary),
+               selection=run_files.SelectionStates(run_dir, summary), images=run_files.run_images(run_dir, summary))
 
 
 def pareto_front(times_ms, errors):
@@ -261,7 +264,7 @@ def _measure_group(members, reference):
 
 
 def _write_errors_csv(path, runs, errors):
-    with open(path, "w", newline="", encoding="utf-8") as handle:
+    with atomic.atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(ERROR_COLUMNS)
         for run in runs:

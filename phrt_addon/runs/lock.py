@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 LOCK_NAME = ".phrt-lock"
-_UNSAFE = re.compile(r"[^A-Za-z0-9._]")
+_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 
 
 class LockHeld(ValueError):
@@ -34,7 +34,7 @@ class LockHeld(ValueError):
 
 
 def host_name() -> str:
-    """This host's name as it appears in lock files and temporary names (no '-', '/' or spaces)."""
+    """This host's name as it appears in lock files and temporary names (letters, digits and _ only)."""
     return _UNSAFE.sub("_", socket.gethostname() or "host")
 
 
