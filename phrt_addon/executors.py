@@ -49,7 +49,8 @@ from .plan import JobOutcome
 RESOURCE = "phrt"  # each worker has phrt=1; each job asks for phrt=1: one replay at a time per worker
 RETRIES = 2
 CONNECT_TIMEOUT_S = 10
-DEFAULT_DASHBOARD = ":8787"
+DEFAULT_DASHBOARD = "127.0.0.1:8787"  # this machine only: the dashboard shows task names, paths and logs
+LOCAL_HOST = "127.0.0.1"  # a LocalCluster's scheduler and workers listen here only
 PIP_DASK = "dask[distributed,diagnostics]==2026.8.0"
 _ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
 
@@ -65,6 +66,40 @@ def check_scheduler_address(address: str) -> str:
         raise ExecutorError(f"malformed scheduler address '{address}': give tcp://HOST:PORT, e.g. "
                             f"--scheduler tcp://render1:8786")
     return address
+
+
+def check_tls_options(scheduler, ca_file, cert, key):
+    """ExecutorError unless the TLS files go with a tls:// scheduler: all three or none, each a
+    readable file, and a tls:// scheduler is given them (Dask's own configuration
+    ``distributed.comm.tls.*`` counts too)."""
+    given = [value for value in (ca_file, cert, key) if value is not None]
+    tls = bool(scheduler) and str(scheduler).startswith("tls://")
+    if given and not tls:
+        raise ExecutorError("--tls-ca-file/--tls-cert/--tls-key are for a tls:// --scheduler")
+    if given and len(given) != 3:
+        raise ExecutorError("give all of --tls-ca-file, --tls-cert and --tls-key for a tls:// scheduler")
+    for value in given:
+        if not os.path.isfile(value):
+            raise ExecutorError(f"no TLS file '{value}'")
+    if tls and not given and not _tls_configured():
+        raise ExecutorError(f"the scheduler {scheduler} speaks TLS: give --tls-ca-file, --tls-cert and --tls-key "
+                            f"(or Dask's distributed.comm.tls configuration; docs/cluster.md)")
+
+
+def _tls_configured() -> bool:
+    try:
+        import dask.config
+    except ImportError:
+        return False
+    return bool(dask.config.get("distributed.comm.tls.ca-file", None))
+
+
+def tls_security(ca_file, cert, key):
+    """A ``distributed.security.Security`` for a client of a TLS cluster (encryption required)."""
+    _import_distributed()
+    from distributed.security import Security
+    return Security(tls_ca_file=str(ca_file), tls_client_cert=str(cert), tls_client_key=str(key),
+                    require_encryption=True)
 
 
 def _probe(address: str, timeout_s: float):
@@ -179,7 +214,8 @@ class DaskExecutor:
     connects and checks the workers; ``close()`` stops what it started."""
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None, *, plugins=(),
-                 dashboard_address: str = DEFAULT_DASHBOARD, connect_timeout_s: float = CONNECT_TIMEOUT_S):
+                 dashboard_address: str = DEFAULT_DASHBOARD, connect_timeout_s: float = CONNECT_TIMEOUT_S,
+                 security=None):
         if (workers is None) == (scheduler is None):
             raise ExecutorError("give the Dask executor either a number of workers or a scheduler address")
         if workers is not None and workers < 1:
@@ -188,6 +224,7 @@ class DaskExecutor:
         self.scheduler = check_scheduler_address(scheduler) if scheduler is not None else None
         self.plugins = tuple(plugins)  # distributed.WorkerPlugin instances, set up on every worker
         self.dashboard_address = dashboard_address
+        self.security = security  # distributed.security.Security of a TLS cluster, or None
         self.connect_timeout_s = connect_timeout_s
         self.cluster = None
         self.client = None
@@ -204,12 +241,14 @@ class DaskExecutor:
                     warnings.simplefilter("ignore")
                     self.cluster = distributed.LocalCluster(
                         n_workers=self.workers, threads_per_worker=1, processes=True,
-                        resources={RESOURCE: 1}, memory_limit=0, dashboard_address=self.dashboard_address)
+                        resources={RESOURCE: 1}, memory_limit=0, dashboard_address=self.dashboard_address,
+                        host=LOCAL_HOST)
                 self.client = distributed.Client(self.cluster)
             else:
                 try:
                     _probe(self.scheduler, self.connect_timeout_s)
-                    self.client = distributed.Client(self.scheduler, timeout=self.connect_timeout_s)
+                    options = {} if self.security is None else {"security": self.security}
+                    self.client = distributed.Client(self.scheduler, timeout=self.connect_timeout_s, **options)
                 except (OSError, TimeoutError) as error:
                     raise ExecutorError(f"cannot reach the Dask scheduler at {self.scheduler} ({_one_line(error)}): "
                                         f"start one with 'dask scheduler' (docs/cluster.md)") from None
