@@ -13,7 +13,7 @@ flushed, so a cancelled replay leaves complete frames and logs only.
 A run folder has one writer (``.phrt-lock``, ``runs/lock.py``): a second replay into a live
 run's folder is refused, a dead writer's lock taken over.  A folder holding another run is
 reused only with ``overwrite=True`` (``--overwrite``), which removes that run's files first
-(``summary.json`` first, so the folder never passes for a run while it is being emptied).
+(``runs/folder.py``).
 
 Nothing half-written ever carries a final name: an image is written as
 ``frames/.NNNN.partial-HOST-PID.<ext>``, checked to be complete (``runlog.image_is_complete``:

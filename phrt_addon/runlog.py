@@ -209,10 +209,8 @@ class RunLog:
                  summary_every_s=SUMMARY_EVERY_S, clock=time.monotonic):
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.run_dir / SUMMARY_JSON).unlink(missing_ok=True)  # first: the folder stops being a run
-        self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
-                                    extra_selection_columns)
-        self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
+        if facts is None:
+            (self.run_dir / SUMMARY_JSON).unlink(missing_ok=True)  # first: the folder stops being a run
         # What summary.json needs, kept compact (a 1000-frame replay must not grow with its length
         # more than it must): one tuple per frame, per element its frames and selected flags.
         self._frame_values = []
@@ -222,14 +220,17 @@ class RunLog:
         self._summary_every_s = float(summary_every_s)
         self._clock = clock
         self._summary_written_at = None
+        self._selection = self._frames = None
         self.summaries_written = 0
-        if self._facts is not None:
+        if self._facts is not None:  # the run exists (0 frames) before its logs do
             self._check_facts(self._facts)
-            if self._frames.extra is not None:
-                self._frames.flush()  # the header now: the columns are known
-            if self._selection.extra is not None:
-                self._selection.flush()
             self.write_partial_summary()
+        self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
+                                    extra_selection_columns)
+        self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
+        for table in (self._selection, self._frames):
+            if table.extra is not None:
+                table.flush()  # the header now: its columns are known
 
     @property
     def frame_count(self):
@@ -310,7 +311,8 @@ class RunLog:
                    "mode": first.get("mode", summary_extra.get("mode")), "resolution": summary_extra["resolution"],
                    "budget_ms": first.get("budget_ms", summary_extra.get("budget_ms"))}
         summary.update(summarize(frame_rows, selection_states))
-        summary["non_finite_values_dropped"] = self._frames.non_finite + self._selection.non_finite
+        summary["non_finite_values_dropped"] = sum(table.non_finite for table in (self._frames, self._selection)
+                                                   if table is not None)
         summary["machine"] = machine_info()
         summary.update(summary_extra)
         summary = _round_json(_json_safe(summary))

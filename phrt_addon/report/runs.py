@@ -153,7 +153,7 @@ def load_run(run_dir):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ValueError(f"{run_dir} is not a directory: give a RUN_DIR written by 'phrt render'")
-    if not (run_dir / runlog.FRAMES_CSV).exists():
+    if not (run_dir / runlog.FRAMES_CSV).exists() and not (run_dir / runlog.SUMMARY_JSON).exists():
         raise ValueError(f"{run_dir} has no {runlog.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
     try:
         summary = runlog.read_summary(run_dir)

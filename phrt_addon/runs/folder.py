@@ -1,7 +1,7 @@
 """A run folder taken for one replay: locked (``lock.py``), refused when it holds another run unless
-the caller says to overwrite it, and then emptied of that run's files (``summary.json`` first, so
-the folder never passes for a run while it is being emptied; nothing but a run's own files is
-removed) and of what dead writers left (temporary files of this host's dead processes).
+the caller says to overwrite it, and then emptied of that run's files (after a ``summary.json``
+that commits no frame has replaced the old one, so the folder never passes for the old run while
+it is being emptied; nothing but a run's own files is removed) and of what dead writers left (temporary files of this host's dead processes).
 
 Plain Python, no ``bpy``.
 """
@@ -58,7 +58,11 @@ def take(run_dir: Path, overwrite: bool):
                               f"another --out")
         frames = run_dir / FRAMES_DIR
         if held is not None:
-            for name in RUN_FILES:  # summary.json first
+            # First a summary that commits nothing: killed at any moment of the clean-up, the folder
+            # reads back as a run of 0 frames, never as the old run with some of its files gone.
+            atomic.write_text(run_dir / SUMMARY_JSON, json.dumps(
+                {"partial": True, "frame_count": 0, "images": "none", "replacing": held}) + "\n")
+            for name in RUN_FILES[1:]:
                 (run_dir / name).unlink(missing_ok=True)
             for pattern in RUN_IMAGES:
                 for image in frames.glob(pattern) if frames.is_dir() else ():
