@@ -11,6 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 spec = importlib.util.spec_from_file_location("faults", ROOT / "tools" / "faults.py")
 faults = importlib.util.module_from_spec(spec)
+sys.modules["faults"] = faults  # dataclasses look their module up there
 spec.loader.exec_module(faults)
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the harness uses inotify")
