@@ -65,6 +65,32 @@ REGRET_COLUMNS = ("run", "frame", "time_left_ms", "capacity_ms", "heuristic_flip
 MAX_NODES = 2_000_000
 
 
+# Candidates the oracle judges per sampled frame (each costs a render): the most valuable by the
+# selection's own estimate, plus a few drawn at random from the rest (what the estimate misjudges).
+MAX_CANDIDATES = 48
+RANDOM_CANDIDATES = 8
+
+
+def cap_candidates(names, estimates, cap: int = MAX_CANDIDATES, random_extra: int = RANDOM_CANDIDATES,
+                   seed: int = 0) -> tuple[list, bool]:
+    """At most ``cap`` of ``names``: the ``cap - random_extra`` with the largest ``estimates`` (the
+    selection's relevance R), then ``random_extra`` drawn from the others (``seed``: the frame, so
+    a rerun judges the same ones), in their original order; and whether any was left out."""
+    names = list(names)
+    if cap < 1:
+        raise ValueError(f"the oracle needs to judge at least 1 candidate per frame, not {cap}")
+    if len(names) <= cap:
+        return names, False
+    values = np.nan_to_num(np.asarray(estimates, dtype=np.float64), nan=-np.inf)
+    top = max(cap - max(random_extra, 0), 0)
+    order = np.argsort(-values, kind="stable")
+    kept = set(order[:top].tolist())
+    rest = np.array(sorted(set(range(len(names))) - kept))
+    drawn = np.random.default_rng(seed).choice(rest, size=min(cap - top, len(rest)), replace=False)
+    kept.update(drawn.tolist())
+    return [names[index] for index in sorted(kept)], True
+
+
 def sampled_frames(frames, every: int = DEFAULT_EVERY) -> list[int]:
     """Every ``every``-th of ``frames`` (sorted): the k-th, 2k-th, ... frame of the run, so the
     first frame (cold cost model, one-time set-up) is judged only in runs shorter than k."""
@@ -264,7 +290,7 @@ def regret_row(run_label, frame, time_left_ms, heuristic_set, heuristic_flip, or
             "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
 
 
-def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note=""):
+def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None):
     """Write the oracle folder's three files (``oracle.json`` last: it marks completion)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -286,7 +312,7 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
             "frames_oracle_differs": sum(1 for row in rows if row["oracle"] != row["heuristic"]),
         }
     info = runlog._round_json(runlog._json_safe({
-        "every": every, "frames": list(frames), "runs": runs,
+        "every": every, "frames": list(frames), "runs": runs, "capped": capped or {},
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         "reference, an exact knapsack on measured benefit and cost within each run's own time left"}))

@@ -243,6 +243,13 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
         every = oracle_results.info.get("every") if oracle_results is not None else oracle.DEFAULT_EVERY
         link = (f" Per frame: [{oracle.REGRET_CSV}]({oracle.REGRET_CSV}); each candidate's measured benefit "
                 f"and cost: [{oracle.CANDIDATES_CSV}]({oracle.CANDIDATES_CSV})." if oracle_results is not None else "")
+        capped = (oracle_results.info.get("capped") or {}) if oracle_results is not None else {}
+        if capped:
+            judged = sum(pair[0] for pair in capped.values())
+            total = sum(pair[1] for pair in capped.values())
+            link += (f" The oracle was capped on {len(capped)} sampled frame(s): it judged {judged} of their {total} "
+                     f"candidates (the most relevant by the selection's own estimate plus a few at random), so "
+                     f"its choice there is among those only.")
         items.append(("table", _Table(
             "Regret against the oracle",
             ["Run", "Selection", "Budget ms", "Sampled frames", "Heuristic LDR-FLIP", "Oracle LDR-FLIP",
