@@ -276,7 +276,7 @@ def _budget_fractions(args):
 def command_sweep(args):
     from .phrt_addon import oracle as oracle_module
     from .phrt_addon import plan as plan_module
-    _check_executor_options(args)
+    cluster_options = _executor_options(args)
     fractions = _budget_fractions(args)
     variants = tuple(plan_module.VARIANTS)
     if args.variants is not None:
@@ -301,46 +301,29 @@ def command_sweep(args):
                                       oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
     except plan_module.PlanError as error:
         raise UserError(str(error)) from None
-    executor = _start_executor(args.workers, args.scheduler, args.dashboard, _security(args))
+    executor = _start_executor(args.workers, args.scheduler, cluster_options)
     try:
         return _run_sweep(plan, folder, label, camera.name, frame_range, resolution, executor)
     finally:
         _close_executor(executor)
 
 
-def _check_executor_options(args):
-    """UserError for --workers with --scheduler, a malformed scheduler address, --dashboard without
-    --workers, TLS files without a tls:// scheduler or missing, or a tls:// scheduler without them
-    (loads nothing)."""
+def _executor_options(args):
+    """The checked --workers/--scheduler/--dashboard/--tls-* options (UserError when they do not go
+    together or a TLS file is missing; loads nothing)."""
     from .phrt_addon import executors
     try:
-        executors.make_executor(args.workers, args.scheduler)
-        executors.check_tls_options(args.scheduler, args.tls_ca_file, args.tls_cert, args.tls_key)
+        return executors.executor_options(args.workers, args.scheduler, args.dashboard, args.tls_ca_file,
+                                          args.tls_cert, args.tls_key)
     except executors.ExecutorError as error:
         raise UserError(str(error)) from None
-    if args.dashboard is not None and args.workers is None:
-        raise UserError("--dashboard is for the LocalCluster of --workers: an existing cluster's dashboard is its "
-                        "scheduler's")
 
 
-def _security(args):
-    """The Dask security of --tls-* (None without them)."""
-    from .phrt_addon import executors
-    if args.tls_ca_file is None:
-        return None
-    return executors.tls_security(args.tls_ca_file, args.tls_cert, args.tls_key)
-
-
-def _start_executor(workers, scheduler, dashboard=None, security=None):
+def _start_executor(workers, scheduler, options):
     """The executor of --workers / --scheduler, started (UserError when the cluster cannot run the
     plan), its dashboard printed."""
     from .engine import sweep as sweep_engine
     from .phrt_addon import executors
-    options = {}
-    if dashboard is not None:
-        options["dashboard_address"] = dashboard
-    if security is not None:
-        options["security"] = security
     try:
         executor = sweep_engine.make_executor(workers, scheduler, **options)
         if isinstance(executor, executors.DaskExecutor):
@@ -366,6 +349,7 @@ def _close_executor(executor):
 def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, executor):
     from .engine import sweep as sweep_engine
     from .phrt_addon import executors
+    from .phrt_addon.runs import progress as run_progress
     from .phrt_addon import plan as plan_module
     try:
         plan_path = plan_module.write_plan(plan, folder)
@@ -375,7 +359,7 @@ def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, execut
     total = len(plan.jobs)
     print(f"phrt: sweep of {label}/{camera_name} frames {frame_range[0]}-{frame_range[1]} at "
           f"{resolution[0]}x{resolution[1]}: {len(plan.runs)} runs and the oracle -> {plan_path}", flush=True)
-    progress = executors.Progress(total, sys.stderr)
+    progress = run_progress.Progress(total, sys.stderr)
     counter = [0]
 
     def show(outcome):

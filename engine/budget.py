@@ -12,6 +12,7 @@ import tempfile
 from pathlib import Path
 
 from ..phrt_addon import budget, runlog
+from ..phrt_addon.runs import summary as run_summary
 from . import extract
 
 # Measured frames per mode (after one warm-up frame): a few seconds at 640x480 here.
@@ -45,7 +46,7 @@ def resolve(scene, camera, frame_range, fraction, *, runner, resolution=None, sc
     width, height = resolution if resolution is not None else extract.resolution(scene)
     label = scene_label or scene.name
     runs = budget.find_reference_runs(search_dirs, label, camera.name, (width, height),
-                                      runlog.machine_info()["cpu_model"])
+                                      run_summary.machine_info()["cpu_model"])
     if runs is not None:
         return budget.from_runs(fraction, *runs)
     return calibrate(scene, camera, frame_range, fraction, runner=runner, resolution=resolution,

@@ -1,4 +1,4 @@
-"""Running a plan's jobs on a Dask cluster, and the progress line of a plan's run.
+"""Running a plan's jobs on a Dask cluster (the progress line of a plan's run: ``runs/progress.py``).
 
 :class:`DaskExecutor` has the interface of ``plan.LocalExecutor``
 (``run(plan_path, plan, execute, on_outcome)``): each job of the plan is one
@@ -38,7 +38,6 @@ import os
 import re
 import socket
 import threading
-import time
 import uuid
 import warnings
 from dataclasses import replace
@@ -66,6 +65,24 @@ def check_scheduler_address(address: str) -> str:
         raise ExecutorError(f"malformed scheduler address '{address}': give tcp://HOST:PORT, e.g. "
                             f"--scheduler tcp://render1:8786")
     return address
+
+
+def executor_options(workers=None, scheduler=None, dashboard=None, tls_ca_file=None, tls_cert=None,
+                     tls_key=None) -> dict:
+    """The keyword options of :func:`make_executor` for the ``phrt sweep`` flags, checked
+    (ExecutorError): --workers and --scheduler not both, a well-formed address, --dashboard only
+    with --workers, the TLS files only (and all three) with a tls:// scheduler."""
+    make_executor(workers, scheduler)
+    check_tls_options(scheduler, tls_ca_file, tls_cert, tls_key)
+    if dashboard is not None and workers is None:
+        raise ExecutorError("--dashboard is for the LocalCluster of --workers: an existing cluster's dashboard is "
+                            "its scheduler's")
+    options = {}
+    if dashboard is not None:
+        options["dashboard_address"] = dashboard
+    if tls_ca_file is not None:
+        options["security"] = tls_security(tls_ca_file, tls_cert, tls_key)
+    return options
 
 
 def check_tls_options(scheduler, ca_file, cert, key):
@@ -377,47 +394,3 @@ def make_executor(workers: int | None = None, scheduler: str | None = None, **op
         raise ExecutorError("--workers and --scheduler both given: start a LocalCluster of N workers or use an "
                             "existing cluster, not both")
     return DaskExecutor(workers=workers, scheduler=scheduler, **options)
-
-
-class Progress:
-    """The line ``jobs 3/10 done (1 skipped, 0 failed), ETA 40 s`` on ``stream`` when it is a terminal
-    (nothing otherwise).  The ETA is the time per job that ran so far (skipped jobs left out,
-    several workers counted in: wall time over jobs done) times the jobs left."""
-
-    def __init__(self, total: int, stream, clock=time.perf_counter):
-        self.total = total
-        self.stream = stream
-        self.active = bool(getattr(stream, "isatty", lambda: False)())
-        self.clock = clock
-        self.started = clock()
-        self.finished = self.skipped = self.failed = 0
-
-    def eta_s(self) -> float | None:
-        ran = self.finished - self.skipped
-        if ran <= 0:
-            return None
-        return (self.clock() - self.started) / ran * (self.total - self.finished)
-
-    def line(self) -> str:
-        eta = self.eta_s()
-        text = f"jobs {self.finished}/{self.total} done ({self.skipped} skipped, {self.failed} failed)"
-        if self.finished < self.total:
-            text += f", ETA {eta:.0f} s" if eta is not None else ", ETA --"
-        return text
-
-    def update(self, outcome: JobOutcome):
-        self.finished += 1
-        self.skipped += outcome.status == "skipped"
-        self.failed += outcome.status == "failed"
-        self.show()
-
-    def show(self):
-        if self.active:
-            self.stream.write("\r\033[K  " + self.line() + ("\n" if self.finished >= self.total else ""))
-            self.stream.flush()
-
-    def clear(self):
-        """Wipe the line (before printing something else on the terminal)."""
-        if self.active and self.finished < self.total:
-            self.stream.write("\r\033[K")
-            self.stream.flush()

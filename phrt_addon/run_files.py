@@ -152,7 +152,7 @@ class SelectionStates:
         return sum(len(flags) for _, flags in self.by_frame.values())
 
     def flips_per_element_per_100(self) -> dict:
-        """``runlog.flips_per_element_per_100`` of these rows, computed once."""
+        """``runs.summary.flips_per_element_per_100`` of these rows, computed once."""
         if self._flips is None:
             frames = sorted(self.by_frame)
             states = {}

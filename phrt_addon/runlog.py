@@ -32,7 +32,6 @@ from array import array
 import logging
 import math
 import os
-import platform
 import time
 from numbers import Integral, Real
 from pathlib import Path
@@ -40,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from .runs import atomic
+from .runs.summary import machine_info, summarize
 from .run_files import (frame_image_path, image_is_complete, output_dir_problem, read_frames, read_selection,
                         read_summary)
 from .schema import (BOOL_COLUMNS, FRAME_COLUMNS, FRAMES_CSV, FRAMES_DIR, REASONS, SELECTION_COLUMNS,
@@ -49,8 +49,8 @@ from .schema import (BOOL_COLUMNS, FRAME_COLUMNS, FRAMES_CSV, FRAMES_DIR, REASON
 # interface: callers write a run with RunLog and read it back with runlog.read_frames(...).
 __all__ = ["BOOL_COLUMNS", "FRAME_COLUMNS", "FRAMES_CSV", "FRAMES_DIR", "REASONS", "SELECTION_COLUMNS",
            "SELECTION_CSV", "STAGE_COLUMNS", "STRING_COLUMNS", "SUMMARY_JSON", "RunLog", "finite_or_none",
-           "flips_per_element_per_100", "format_value", "frame_image_path", "image_is_complete", "machine_info",
-           "output_dir_problem", "read_frames", "read_selection", "read_summary", "summarize"]
+           "format_value", "frame_image_path", "image_is_complete", "output_dir_problem", "read_frames",
+           "read_selection", "read_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -342,86 +342,3 @@ class RunLog:
         if not self._closed:
             self._close_files()
         return False
-
-
-def summarize(frame_rows, selection_rows):
-    """The computed part of ``summary.json`` from frame rows and selection rows."""
-    def column(name):
-        values = [row.get(name) for row in frame_rows]
-        return np.array([float(v) for v in values if v is not None and math.isfinite(float(v))])
-
-    def mean(values):
-        return float(values.mean()) if values.size else None
-
-    total = column("total_ms")
-    frames = [int(row["frame"]) for row in frame_rows]
-    flips = flips_per_element_per_100(selection_rows)
-    rates = np.array(list(flips.values()), dtype=float)
-    return {
-        "frame_count": len(frame_rows),
-        "frame_start": min(frames) if frames else None,
-        "frame_end": max(frames) if frames else None,
-        "total_ms": {
-            "mean": mean(total),
-            "p50": float(np.percentile(total, 50)) if total.size else None,
-            "p95": float(np.percentile(total, 95)) if total.size else None,
-            "max": float(total.max()) if total.size else None,
-        },
-        "stage_mean_ms": {name: mean(column(name)) for name in STAGE_COLUMNS},
-        "predicted_trace_mean_ms": mean(column("predicted_trace_ms")),
-        "mean_n_visible": mean(column("n_visible")),
-        "mean_n_selected": mean(column("n_selected")),
-        "mean_rays": mean(column("rays")),
-        "selection_flips_per_element_per_100_frames": {
-            "mean": float(rates.mean()) if rates.size else 0.0,
-            "max": float(rates.max()) if rates.size else 0.0,
-            "per_element": flips,
-        },
-    }
-
-
-def flips_per_element_per_100(selection_rows):
-    """Selection flips of each element per 100 frames of the run.
-
-    A flip is a change of an element's ``selected`` state between two
-    consecutive frames (by frame number) in which the element has a row.  The
-    count is normalised by the run's length: the number of distinct frames in
-    ``selection_rows``.  Returns ``{element: flips * 100 / frames}``.
-    """
-    rows = [row for row in selection_rows if row.get("selected") is not None]
-    frame_count = len({int(row["frame"]) for row in rows})
-    if frame_count == 0:
-        return {}
-    by_element = {}
-    for row in rows:
-        by_element.setdefault(str(row["element"]), []).append(
-            (int(row["frame"]), bool(row["selected"])))
-    rates = {}
-    for element, states in by_element.items():
-        states.sort()
-        selected = np.array([state for _, state in states], dtype=bool)
-        flips = int(np.count_nonzero(selected[1:] != selected[:-1]))
-        rates[element] = 100.0 * flips / frame_count
-    return rates
-
-
-def machine_info():
-    """CPU model and core counts of this machine."""
-    model = None
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
-            for line in cpuinfo:
-                if line.lower().startswith(("model name", "hardware")):
-                    model = line.split(":", 1)[1].strip() or None
-                    break
-    except OSError:
-        pass
-    info = {
-        "cpu_model": model or platform.processor() or platform.machine(),
-        "cores": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-    }
-    if hasattr(os, "sched_getaffinity"):
-        info["usable_cores"] = len(os.sched_getaffinity(0))
-    return info

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 from phrt.phrt_addon import defaults, heuristic, runlog, selection_terms
+from phrt.phrt_addon.runs import summary as run_summary
 from phrt.phrt_addon.cost_model import CostModel
 from phrt.phrt_addon.heuristic import FrameElements, SelectionSettings, select
 
@@ -260,7 +261,7 @@ def test_selection_flips_of_results_are_counted_per_100_frames_by_the_one_rule()
     on = select(elements, None, hybrid(), time_left_ms=1, element_ms=np.ones(1))
     off = select(elements, None, hybrid(), time_left_ms=0, element_ms=np.ones(1))
     rows = [row for number, result in enumerate([on, off, on, off], 1) for row in result.rows(number)]
-    assert runlog.flips_per_element_per_100(rows) == {"e0": 75.0}  # 3 flips in 4 frames
+    assert run_summary.flips_per_element_per_100(rows) == {"e0": 75.0}  # 3 flips in 4 frames
 
 
 def test_mismatched_array_lengths_are_refused_with_the_field_name():

@@ -9,6 +9,7 @@ import pytest
 
 from phrt.phrt_addon import report, run_files, runlog
 from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.runs import summary as run_summary
 
 FACTS = {"scene": "atrium", "path": "path1", "resolution": [64, 48], "blender_version": "5.0.1",
          "embreex_version": "4.4.0.post1", "images": "none", "frames_planned": 10}
@@ -99,7 +100,7 @@ def test_element_names_with_line_breaks_and_any_unicode_survive(tmp_path, name):
     rows = runlog.read_selection(tmp_path / "run")
     assert [(row["frame"], row["element"]) for row in rows] == [(1, name), (1, "plain"), (2, name)]
     states = run_files.SelectionStates(tmp_path / "run")
-    assert states.flips_per_element_per_100() == runlog.flips_per_element_per_100(rows) == {name: 50.0,
+    assert states.flips_per_element_per_100() == run_summary.flips_per_element_per_100(rows) == {name: 50.0,
                                                                                              "plain": 0.0}
 
 
