@@ -42,7 +42,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -316,7 +315,5 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         "reference, an exact knapsack on measured benefit and cost within each run's own time left"}))
-    temporary = folder / (ORACLE_JSON + ".tmp")
-    temporary.write_text(json.dumps(info, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    os.replace(temporary, folder / ORACLE_JSON)
+    atomic.write_text(folder / ORACLE_JSON, json.dumps(info, indent=2, allow_nan=False) + "\n")
     return info
