@@ -174,8 +174,12 @@ def check_folder(run_dir: Path, reference_dir: Path, first_frame: int, killed: b
         return [f"summary.json cannot be read: {error}"]
     frames = reader.read_frames(run_dir)
     count = summary.get("frame_count")
-    if killed and summary.get("partial") is not True:
-        problems.append(f"summary.json of a killed run is not partial: {summary.get('partial')!r}")
+    # A kill can land after the final summary.json was renamed into place (a kill at the last
+    # summary write): the run is then whole, and says so.
+    whole = summary.get("partial") is False and count == summary.get("frames_planned")
+    if killed and summary.get("partial") is not True and not whole:
+        problems.append(f"summary.json of a killed run is neither partial nor whole: partial="
+                        f"{summary.get('partial')!r}, {count} of {summary.get('frames_planned')} frames")
     if count != len(frames):
         problems.append(f"summary frame_count {count} != {len(frames)} frames.csv rows read")
     numbers = [row["frame"] for row in frames]
@@ -200,7 +204,7 @@ def check_folder(run_dir: Path, reference_dir: Path, first_frame: int, killed: b
         problems.append(f"the report refused the folder: {error}")
     else:
         text = files.markdown.read_text(encoding="utf-8")
-        if killed and "partial" not in text:
+        if summary.get("partial") and "Partial runs" not in text:
             problems.append("the report does not say the run is partial")
     return problems
 
