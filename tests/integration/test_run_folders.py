@@ -101,8 +101,10 @@ def wait_for(condition, process, timeout_s=300):
 
 def test_a_second_writer_is_refused_and_a_dead_writers_lock_is_taken_over(blend, tmp_path):
     out = tmp_path / "R"
-    first = subprocess.Popen([str(PHRT), "render", str(blend), "--out", str(out), "--images", "none", *SMALL],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # A long replay (frames past the path's end hold its last pose): it is still writing when the
+    # second command, a Blender start later, looks at the folder.
+    first = subprocess.Popen([str(PHRT), "render", str(blend), "--out", str(out), "--images", "none",
+                              "--frames", "1-100000", *SMALL], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         assert wait_for(lambda: (out / runlog.SUMMARY_JSON).exists(), first), "the first render never started"
         assert_one_error_line(run_phrt(["render", str(blend), "--out", str(out), *SMALL, "--frames", "1-2"],
