@@ -112,15 +112,15 @@ class Kill:
 
 
 def kill_once(scene: str, run_dir: Path, moment: str, rng: random.Random, frames: str, overwrite: bool,
-              timeout_s: float = 300.0) -> bool:
+              timeout_s: float = 300.0, max_skip: int = 5, max_delay_s: float = 4.0) -> bool:
     """Start a replay into ``run_dir`` and SIGKILL it at ``moment``; True if it was killed."""
     argv = _phrt() + ["render", scene, "--frames", frames, "--out", str(run_dir), *RENDER_ARGS]
     if overwrite:
         argv.append("--overwrite")
     process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     notify = _Inotify()
-    skip = rng.randrange(5)  # which event of its kind kills: spread over frames
-    delay = rng.uniform(0.0, 4.0)
+    skip = rng.randrange(max_skip)  # which event of its kind kills: spread over frames
+    delay = rng.uniform(0.0, max_delay_s)
     deadline = time.monotonic() + timeout_s
     watched = set()
     summary_seen_at = None
@@ -209,7 +209,8 @@ def check_folder(run_dir: Path, reference_dir: Path, first_frame: int, killed: b
     return problems
 
 
-def run(kills: int, out: Path, seed: int, scene: str = "arcade", frame_count: int = 40, log=print) -> list:
+def run(kills: int, out: Path, seed: int, scene: str = "arcade", frame_count: int = 40, log=print,
+        max_skip: int = 5, max_delay_s: float = 4.0) -> list:
     rng = random.Random(seed)
     out = Path(out)
     if out.exists():
@@ -225,7 +226,8 @@ def run(kills: int, out: Path, seed: int, scene: str = "arcade", frame_count: in
         overwrite = number % 4 == 3
         run_dir = results[-1].run_dir if overwrite else out / f"kill-{number:02d}"
         kill = Kill(number, moment, run_dir, overwrite)
-        kill.killed = kill_once(scene, run_dir, moment, rng, frames, overwrite)
+        kill.killed = kill_once(scene, run_dir, moment, rng, frames, overwrite, max_skip=max_skip,
+                                max_delay_s=max_delay_s)
         kill.problems = check_folder(run_dir, reference, 1, kill.killed, out / "report")
         try:
             from phrt.phrt_addon import run_files as reader
