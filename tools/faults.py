@@ -159,7 +159,7 @@ def kill_once(scene: str, run_dir: Path, moment: str, rng: random.Random, frames
 def check_folder(run_dir: Path, reference_dir: Path, first_frame: int, killed: bool, report_dir: Path) -> list:
     """What is inconsistent in a killed run's folder (empty when nothing is)."""
     from phrt.phrt_addon import report
-    from phrt.phrt_addon import run_files as reader
+    from phrt.phrt_addon.runs import run_files as reader
 
     problems = []
     try:
@@ -230,7 +230,7 @@ def run(kills: int, out: Path, seed: int, scene: str = "arcade", frame_count: in
                                 max_delay_s=max_delay_s)
         kill.problems = check_folder(run_dir, reference, 1, kill.killed, out / "report")
         try:
-            from phrt.phrt_addon import run_files as reader
+            from phrt.phrt_addon.runs import run_files as reader
             kill.frames = reader.read_summary(run_dir).get("frame_count") or 0
         except (FileNotFoundError, ValueError):
             pass

@@ -5,7 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import defaults, metrics, oracle, runlog
+from .. import defaults
+from . import metrics, oracle
+from ..runs import run_log
 from .runs import BASELINE_VARIANT, PAPER_SCENES, PAPER_TABLE_II, WORST_ELEMENTS
 from .selection import RunRegret, variant_label
 
@@ -19,7 +21,7 @@ def _number(value, spec):
 
 
 @dataclass
-class _Table:
+class ReportTable:
     title: str
     header: list
     rows: list
@@ -62,8 +64,8 @@ def table_ii_rows(groups):
     return rows
 
 
-def _sections(runs, groups, references, errors, files, rows=None, regrets=None, pops=None, oracle_results=None):
-    """The report as a list of items: ('h', text), ('p', text), ('table', _Table), ('img', file)."""
+def report_sections(runs, groups, references, errors, files, rows=None, regrets=None, pops=None, oracle_results=None):
+    """The report as a list of items: ('h', text), ('p', text), ('table', ReportTable), ('img', file)."""
     rows = rows or []
     regrets = regrets or {}
     pops = pops or {}
@@ -78,7 +80,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
                                f"{': ' + str(run.summary['error']) if run.summary.get('error') else ''})"
                                for run in partial) + "."))
 
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Render times (ms per frame), after the paper's Table II",
         ["Scene", "Path", "Raster rendering", "Hybrid rendering", "Ray tracing rendering", "Hybrid / raster",
          "Paper: hybrid / raster", "Ray tracing / hybrid", "Paper: ray tracing / hybrid", "Hybrid run"],
@@ -104,7 +106,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             _ms(float(total.max()) if total.size else None),
             _ms(run.mean("raster_ms")), _ms(run.mean("select_ms")), _ms(run.mean("trace_ms")),
             _ms(run.mean("composite_ms")), _number(run.mean("n_selected"), ".1f"), within])
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Runs",
         ["Run", "Scene / path", "Mode", "Budget ms", "Frames", "Mean ms", "p50 ms", "p95 ms",
          "Max ms", "Raster ms", "Select ms", "Trace ms", "Composite ms", "Mean selected",
@@ -122,7 +124,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             str(len(outcome.per_frame)) if run is not reference else str(len(run.frames)),
             _number(outcome.mean("flip"), ".4f"), _number(outcome.mean("relmse"), ".3g"),
             _number(outcome.mean("psnr_db"), ".2f"), outcome.note])
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Error against the reference",
         ["Run", "Scene / path", "Mode", "Reference", "Frames compared", "Mean LDR-FLIP",
          "relMSE", "PSNR dB", "Note"], error_rows,
@@ -152,7 +154,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             _number(float(values.mean()) if values.size else None, ".2f"),
             _number(float(values.max()) if values.size else None, ".2f"),
             ", ".join(f"{element} ({rate:.2f})" for rate, element in worst) or "none"])
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Selection stability",
         ["Run", "Mode", "Elements", "Mean flips / element / 100 frames", "Max",
          "Worst elements"], stability_rows,
@@ -165,7 +167,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
     for key, title in (("cpu_model", "CPU"), ("cores", "Cores")):
         machine_rows.append([title, ", ".join(sorted(
             {str((run.summary.get("machine") or {}).get(key)) for run in runs}))])
-    items.append(("table", _Table("Machine and versions", ["", ""], machine_rows)))
+    items.append(("table", ReportTable("Machine and versions", ["", ""], machine_rows)))
     return items
 
 
@@ -193,7 +195,7 @@ SWEEP_TABLE_FORMATS = (("run", "Run", None), ("mode", "Mode", None), ("variant",
 
 def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     items = []
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         SWEEP_TABLE_TITLE, [title for _, title, _ in SWEEP_TABLE_FORMATS],
         [[(_number(row[key], spec) if spec else str(row[key])) if row[key] is not None else "–"
           for key, _, spec in SWEEP_TABLE_FORMATS] for row in rows],
@@ -213,7 +215,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     for (scene, path), variants in by_budget.items():
         fractions = sorted({fraction for per_budget in variants.values() for fraction in per_budget})
         if len(variants) > 1:
-            items.append(("table", _Table(
+            items.append(("table", ReportTable(
                 f"Selection knobs: {scene} / {path}",
                 ["Selection"] + [f"at {fraction:.2f}: LDR-FLIP / regret" for fraction in fractions],
                 [[variant] + [(f"{_number(per_budget[f]['flip'], '.4f')} / {_number(per_budget[f]['regret'], '.4f')}"
@@ -250,7 +252,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
             link += (f" The oracle was capped on {len(capped)} sampled frame(s): it judged {judged} of their {total} "
                      f"candidates (the most relevant by the selection's own estimate plus a few at random), so "
                      f"its choice there is among those only.")
-        items.append(("table", _Table(
+        items.append(("table", ReportTable(
             "Regret against the oracle",
             ["Run", "Selection", "Budget ms", "Sampled frames", "Heuristic LDR-FLIP", "Oracle LDR-FLIP",
              "Mean regret", "Max regret", "Lost %", "Frames the oracle chose otherwise", "Frames over T",
@@ -285,7 +287,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                           if pop.measured) or "none",
                 pop.note or ("reference" if run.mode == "RAYTRACE" and not pop.pops else "")])
     if pop_rows:
-        items.append(("table", _Table(
+        items.append(("table", ReportTable(
             "Popping",
             ["Run", "Mode", "Flips", "Flips / element / 100 frames", "Popping / 100 frames", "Mean per flip",
              "Worst elements (flips, summed popping)", "Note"], pop_rows,
@@ -348,7 +350,7 @@ def _relevance_comparison(scene, path, paper, error):
                       _number(a["regret"], ".4f"), _number(b["regret"], ".4f"),
                       _number(a["popping"], ".4f"), _number(b["popping"], ".4f")])
     verdict, _ = relevance_verdict(paper, error)
-    return [("table", _Table(
+    return [("table", ReportTable(
         f"Paper relevance against error-aware relevance: {scene} / {path}",
         ["Budget at", "Budget ms", "LDR-FLIP, paper R", "LDR-FLIP, error-aware R", "Change",
          "Regret, paper R", "Regret, error-aware R", "Popping / 100, paper R", "Popping / 100, error-aware R"],

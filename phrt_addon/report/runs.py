@@ -10,8 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import defaults, metrics, run_files, runlog
-from ..runs import atomic
+from .. import defaults
+from . import metrics
+from ..runs import run_log
+from .. import schema
+from ..runs import atomic, run_files
 
 
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
@@ -153,15 +156,15 @@ def load_run(run_dir):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ValueError(f"{run_dir} is not a directory: give a RUN_DIR written by 'phrt render'")
-    if not (run_dir / runlog.FRAMES_CSV).exists() and not (run_dir / runlog.SUMMARY_JSON).exists():
-        raise ValueError(f"{run_dir} has no {runlog.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
+    if not (run_dir / schema.FRAMES_CSV).exists() and not (run_dir / schema.SUMMARY_JSON).exists():
+        raise ValueError(f"{run_dir} has no {schema.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
     try:
-        summary = runlog.read_summary(run_dir)
+        summary = run_files.read_summary(run_dir)
     except FileNotFoundError:
-        raise ValueError(f"{run_dir} has no {runlog.SUMMARY_JSON}: it holds no run; render it again") from None
+        raise ValueError(f"{run_dir} has no {schema.SUMMARY_JSON}: it holds no run; render it again") from None
     except ValueError:
-        raise ValueError(f"{run_dir}/{runlog.SUMMARY_JSON} cannot be read: render the run again") from None
-    return Run(run_dir=run_dir, label=run_dir.name, summary=summary, frames=runlog.read_frames(run_dir, summary),
+        raise ValueError(f"{run_dir}/{schema.SUMMARY_JSON} cannot be read: render the run again") from None
+    return Run(run_dir=run_dir, label=run_dir.name, summary=summary, frames=run_files.read_frames(run_dir, summary),
                selection=run_files.SelectionStates(run_dir, summary), images=run_files.run_images(run_dir, summary))
 
 
@@ -180,14 +183,14 @@ def pareto_front(times_ms, errors):
     return [int(i) for i in front[np.lexsort((errors[front, 0], times[front, 0]))]]
 
 
-def _unique_labels(runs):
+def unique_labels(runs):
     names = [run.run_dir.name for run in runs]
     for run, name in zip(runs, names):
         if names.count(name) > 1:
             run.label = f"{run.run_dir.parent.name}/{name}"
 
 
-def _references(groups, reference):
+def find_references(groups, reference):
     """{group: reference Run or None}."""
     chosen = {}
     if reference is not None:
@@ -202,7 +205,7 @@ def _references(groups, reference):
     return chosen
 
 
-def _measure_group(members, reference):
+def measure_group(members, reference):
     """RunErrors of each run of one (scene, path) group."""
     results = {id(run): RunErrors(run=run, reference=reference) for run in members}
     if reference is None:
@@ -263,7 +266,7 @@ def _measure_group(members, reference):
     return results
 
 
-def _write_errors_csv(path, runs, errors):
+def write_errors_csv(path, runs, errors):
     with atomic.atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(ERROR_COLUMNS)
@@ -272,4 +275,4 @@ def _write_errors_csv(path, runs, errors):
             for row in outcome.per_frame:
                 values = {"scene": run.scene, "path": run.path, "run": run.label, "mode": run.mode,
                           "reference": outcome.reference.label, **row}
-                writer.writerow([runlog.format_value(values[key]) for key in ERROR_COLUMNS])
+                writer.writerow([run_log.format_value(values[key]) for key in ERROR_COLUMNS])

@@ -1,5 +1,5 @@
 """The computed part of a run's ``summary.json``: statistics of its frames, the selection flips
-per element, the machine.  Written by ``runlog.RunLog``; ``flips_per_element_per_100`` is the one
+per element, the machine.  Written by ``run_log.RunLog``; ``flips_per_element_per_100`` is the one
 rule for flips (the report's ``run_files.SelectionStates`` computes the same).  Plain Python +
 numpy, no ``bpy``.
 """

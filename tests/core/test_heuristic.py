@@ -6,10 +6,14 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
-from phrt.phrt_addon import defaults, heuristic, runlog, selection_terms
+from phrt.phrt_addon import defaults
+from phrt.phrt_addon.select import heuristic, selection_terms
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_log
 from phrt.phrt_addon.runs import summary as run_summary
-from phrt.phrt_addon.cost_model import CostModel
-from phrt.phrt_addon.heuristic import FrameElements, SelectionSettings, select
+from phrt.phrt_addon.select.cost_model import CostModel
+from phrt.phrt_addon.select.heuristic import select
+from phrt.phrt_addon.select.selection_terms import FrameElements, SelectionSettings
 
 from hysteresis import hysteresis_margin
 
@@ -247,8 +251,8 @@ def test_rows_have_the_contract_columns_in_order():
     elements = frame(2, area_px=np.array([10, 0]))
     result = select(elements, ["e1"], hybrid(), time_left_ms=5, element_ms=np.ones(2))
     rows = result.rows(frame=12)
-    assert [list(row) for row in rows] == [list(heuristic.SELECTION_COLUMNS)] * 2
-    assert heuristic.SELECTION_COLUMNS == ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S",
+    assert [list(row) for row in rows] == [list(schema.SELECTION_COLUMNS)] * 2
+    assert schema.SELECTION_COLUMNS == ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S",
                                            "R", "selected", "reason")
     assert rows[0] == {"frame": 12, "element": "e0", "visible": 1, "A": 0.01, "P": 1.0, "D": 1.0, "V": 1.0,
                        "Q": 1.0, "C": 1.0, "K": 1.0, "S": 0, "R": 1.0, "selected": 1, "reason": ""}
@@ -490,7 +494,7 @@ def test_an_element_whose_visibility_changes_by_less_than_its_hysteresis_margin_
 
 @PROPERTY_SETTINGS
 @given(scenes(), st.data(), st.floats(0.0, 300.0), st.sampled_from(["paper", "measured"]),
-       st.sampled_from(heuristic.MODES))
+       st.sampled_from(schema.MODES))
 def test_equal_input_gives_equal_output(scene, data, budget, cost_mode, mode):
     previous = previous_of(data.draw, len(scene["names"]))
     settings_ = SelectionSettings(budget_ms=budget, cost_mode=cost_mode, mode=mode, n_parallel=2)
@@ -504,7 +508,7 @@ def test_equal_input_gives_equal_output(scene, data, budget, cost_mode, mode):
 
 @PROPERTY_SETTINGS
 @given(scenes(extreme=True), st.data(), st.one_of(st.floats(0.0, 1e300), st.just(float("inf"))),
-       st.floats(0.0, 1e6), st.sampled_from(["paper", "measured"]), st.sampled_from(heuristic.MODES))
+       st.floats(0.0, 1e6), st.sampled_from(["paper", "measured"]), st.sampled_from(schema.MODES))
 def test_no_nan_or_inf_anywhere_even_from_extreme_input(scene, data, budget, weight, cost_mode, mode):
     elements = FrameElements(**scene)
     result = select(elements, previous_of(data.draw, len(elements)),

@@ -4,7 +4,7 @@ rerun; 10,000 candidates cost N renders, not 10,000."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import oracle
+from phrt.phrt_addon.report import oracle
 
 
 def test_ten_thousand_candidates_are_capped_to_the_most_relevant_and_a_few_random():

@@ -1,4 +1,4 @@
-"""summary.json as a run's commit record (runlog.RunLog with facts, run_files readers): it exists
+"""summary.json as a run's commit record (run_log.RunLog with facts, run_files readers): it exists
 from the start, is rewritten as frames complete at most once a second (or once a frame when
 frames are slower), and the readers read only what it commits: the first frame_count rows, their
 selection rows, and their images in the format it names.  The CSV reader keeps newlines and any
@@ -7,8 +7,9 @@ import json
 
 import pytest
 
-from phrt.phrt_addon import report, run_files, runlog
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon import report, schema
+from phrt.phrt_addon.runs import run_files
+from phrt.phrt_addon.runs.run_log import RunLog
 from phrt.phrt_addon.runs import summary as run_summary
 
 FACTS = {"scene": "atrium", "path": "path1", "resolution": [64, 48], "blender_version": "5.0.1",
@@ -39,7 +40,7 @@ class Clock:
 
 def test_the_summary_exists_from_the_start_and_says_partial(tmp_path):
     RunLog(tmp_path / "run", facts=FACTS)
-    summary = runlog.read_summary(tmp_path / "run")
+    summary = run_files.read_summary(tmp_path / "run")
     assert summary["partial"] is True and summary["frame_count"] == 0 and summary["scene"] == "atrium"
 
 
@@ -51,7 +52,7 @@ def test_the_summary_is_rewritten_at_most_once_a_second_or_once_a_frame(tmp_path
         clock.now += 0.25
         log.add_frame(frame_row(frame), [selection_row(frame, "Glass")])
     assert log.summaries_written == 1 + 2
-    assert runlog.read_summary(tmp_path / "run")["frame_count"] == 8
+    assert run_files.read_summary(tmp_path / "run")["frame_count"] == 8
     for frame in range(11, 14):  # slow frames (2 s each): every frame
         clock.now += 2.0
         log.add_frame(frame_row(frame), [])
@@ -70,12 +71,12 @@ def test_a_killed_run_reads_back_only_what_its_summary_commits(tmp_path):
         clock.now += 1.0 if frame < 3 else 0.1  # frame 3 is logged but the summary is not rewritten
         log.add_frame(frame_row(frame), [selection_row(frame, "Glass")])
     # never closed: the process was killed here
-    summary = runlog.read_summary(folder)
+    summary = run_files.read_summary(folder)
     assert summary["partial"] is True and summary["frame_count"] == 2
-    assert [row["frame"] for row in runlog.read_frames(folder)] == [1, 2]
-    assert [row["frame"] for row in runlog.read_selection(folder)] == [1, 2]
+    assert [row["frame"] for row in run_files.read_frames(folder)] == [1, 2]
+    assert [row["frame"] for row in run_files.read_selection(folder)] == [1, 2]
     assert sorted(run_files.run_images(folder)) == [1, 2]
-    assert (folder / runlog.FRAMES_CSV).read_text().count("\n") == 1 + 3  # the row is there, not committed
+    assert (folder / schema.FRAMES_CSV).read_text().count("\n") == 1 + 3  # the row is there, not committed
 
 
 def test_images_the_summary_does_not_name_are_never_read(tmp_path):
@@ -86,7 +87,7 @@ def test_images_the_summary_does_not_name_are_never_read(tmp_path):
     log = RunLog(folder, facts=FACTS)
     log.add_frame(frame_row(1, mode="RAYTRACE"), [])
     log.close({})
-    assert runlog.frame_image_path(folder, 1) is None and run_files.run_images(folder) == {}
+    assert run_files.frame_image_path(folder, 1) is None and run_files.run_images(folder) == {}
     loaded = report.runs.load_run(folder)
     assert not loaded.has_images
 
@@ -97,7 +98,7 @@ def test_element_names_with_line_breaks_and_any_unicode_survive(tmp_path, name):
     log.add_frame(frame_row(1), [selection_row(1, name), selection_row(1, "plain", False)])
     log.add_frame(frame_row(2), [selection_row(2, name, False)])
     log.close({})
-    rows = runlog.read_selection(tmp_path / "run")
+    rows = run_files.read_selection(tmp_path / "run")
     assert [(row["frame"], row["element"]) for row in rows] == [(1, name), (1, "plain"), (2, name)]
     states = run_files.SelectionStates(tmp_path / "run")
     assert states.flips_per_element_per_100() == run_summary.flips_per_element_per_100(rows) == {name: 50.0,
@@ -105,10 +106,10 @@ def test_element_names_with_line_breaks_and_any_unicode_survive(tmp_path, name):
 
 
 def test_a_record_cut_inside_a_quoted_cell_is_not_read(tmp_path):
-    (tmp_path / runlog.FRAMES_CSV).write_text('frame,mode\n1,"a\nb"\n2,"cut\n', encoding="utf-8")
-    assert [row["frame"] for row in runlog.read_frames(tmp_path)] == [1]
-    (tmp_path / runlog.FRAMES_CSV).write_text('frame,mode\n1,a\n2,b', encoding="utf-8")
-    assert [row["frame"] for row in runlog.read_frames(tmp_path)] == [1]
+    (tmp_path / schema.FRAMES_CSV).write_text('frame,mode\n1,"a\nb"\n2,"cut\n', encoding="utf-8")
+    assert [row["frame"] for row in run_files.read_frames(tmp_path)] == [1]
+    (tmp_path / schema.FRAMES_CSV).write_text('frame,mode\n1,a\n2,b', encoding="utf-8")
+    assert [row["frame"] for row in run_files.read_frames(tmp_path)] == [1]
 
 
 def test_a_partial_run_is_reported_as_partial(tmp_path):

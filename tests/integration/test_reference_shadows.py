@@ -23,8 +23,9 @@ from embreex import rtcore_scene  # noqa: E402
 from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
 from phrt.engine import extract, raster  # noqa: E402
-from phrt.phrt_addon import lighting, rules  # noqa: E402
-from phrt.phrt_addon.shadowmap import ShadowMap, light_views  # noqa: E402
+from phrt.phrt_addon.raster.reference_raster import ReferenceRaster  # noqa: E402
+from phrt.phrt_addon.scene import rules  # noqa: E402
+from phrt.phrt_addon.raster.shadowmap import ShadowMap, light_views  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
 from gpu_probe import run_on_gpu  # noqa: E402
@@ -124,7 +125,7 @@ def test_the_gpu_frame_matches_a_reference_that_builds_its_own_shadow_maps():
             relative = np.abs(mine.linear - theirs.linear) / np.maximum(np.abs(mine.linear), 1e-3)
             assert np.mean(relative > 1e-3) < 0.02, (index, np.mean(relative > 1e-3))
 
-    reference = lighting.ReferenceRaster(snapshot, gbuffer, own).shade(None)
+    reference = ReferenceRaster(snapshot, gbuffer, own).shade(None)
     covered = gbuffer.opaque.covered | gbuffer.transparent.covered
     luminance = reference[..., :3].mean(axis=2)
     lit = covered & (luminance > 0.02)
@@ -132,6 +133,6 @@ def test_the_gpu_frame_matches_a_reference_that_builds_its_own_shadow_maps():
     relative = np.abs(gpu_image[..., :3] - reference[..., :3]).max(axis=2) / np.maximum(luminance, 1e-3)
     assert np.mean(relative[lit] > 1e-2) < 0.01, np.mean(relative[lit] > 1e-2)
     assert np.median(relative[lit]) < 1e-4
-    unshadowed = lighting.ReferenceRaster(snapshot, gbuffer, {}).shade(None)
+    unshadowed = ReferenceRaster(snapshot, gbuffer, {}).shade(None)
     shadowed = lit & (np.abs(unshadowed[..., :3] - reference[..., :3]).max(axis=2) > 0.05 * luminance)
     assert shadowed.sum() > 0.02 * lit.sum()  # shadows are in view: the comparison covers them

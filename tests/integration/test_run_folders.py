@@ -23,7 +23,9 @@ import bpy  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
-from phrt.phrt_addon import gbuffer, run_files, runlog  # noqa: E402
+from phrt.phrt_addon import schema  # noqa: E402
+from phrt.phrt_addon.raster import gbuffer  # noqa: E402
+from phrt.phrt_addon.runs import run_files  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
@@ -106,7 +108,7 @@ def test_a_second_writer_is_refused_and_a_dead_writers_lock_is_taken_over(blend,
     first = subprocess.Popen([str(PHRT), "render", str(blend), "--out", str(out), "--images", "none",
                               "--frames", "1-100000", *SMALL], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        assert wait_for(lambda: (out / runlog.SUMMARY_JSON).exists(), first), "the first render never started"
+        assert wait_for(lambda: (out / schema.SUMMARY_JSON).exists(), first), "the first render never started"
         assert_one_error_line(run_phrt(["render", str(blend), "--out", str(out), *SMALL, "--frames", "1-2"],
                                        tmp_path), f"is being written by process {first.pid}")
         first.send_signal(signal.SIGKILL)
@@ -115,14 +117,14 @@ def test_a_second_writer_is_refused_and_a_dead_writers_lock_is_taken_over(blend,
         if first.poll() is None:
             first.kill()
             first.wait()
-    killed = runlog.read_summary(out)
+    killed = run_files.read_summary(out)
     assert killed["partial"] is True
     assert_one_error_line(run_phrt(["render", str(blend), "--out", str(out), *SMALL, "--frames", "1-2"], tmp_path),
                           "holds another run")
     status, _, errors = run_phrt(["render", str(blend), "--out", str(out), *SMALL, "--frames", "1-2", "--overwrite"],
                                  tmp_path)
     assert status == 0, errors
-    summary = runlog.read_summary(out)
+    summary = run_files.read_summary(out)
     assert summary["partial"] is False and summary["frame_count"] == 2
     assert not (out / ".phrt-lock").exists()
 
@@ -134,7 +136,7 @@ def test_exr_then_images_none_needs_overwrite_and_then_reports_timing_only(blend
     assert sorted(path.name for path in (tmp_path / "R" / "frames").iterdir()) == ["0001.exr", "0002.exr"]
     assert_one_error_line(run_phrt(["render", str(blend), "--out", "R", "--images", "none", *frames], tmp_path),
                           "holds another run")
-    assert runlog.read_summary(tmp_path / "R")["images"] == "exr"  # the refused command changed nothing
+    assert run_files.read_summary(tmp_path / "R")["images"] == "exr"  # the refused command changed nothing
     status, _, errors = run_phrt(["render", str(blend), "--out", "R", "--images", "none", "--overwrite", *frames],
                                  tmp_path)
     assert status == 0, errors
@@ -153,8 +155,8 @@ def test_a_huge_frame_range_starts_at_once_and_stops_on_sigint(blend, tmp_path):
                                 "--frames", "1-2000000000", *SMALL], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                text=True)
     try:
-        assert wait_for(lambda: (out / runlog.FRAMES_CSV).exists()
-                        and (out / runlog.FRAMES_CSV).read_text().count("\n") >= 3, process), process.stderr.read()
+        assert wait_for(lambda: (out / schema.FRAMES_CSV).exists()
+                        and (out / schema.FRAMES_CSV).read_text().count("\n") >= 3, process), process.stderr.read()
         process.send_signal(signal.SIGINT)
         process.wait(timeout=120)
     finally:
@@ -162,7 +164,7 @@ def test_a_huge_frame_range_starts_at_once_and_stops_on_sigint(blend, tmp_path):
             process.kill()
             process.wait()
     assert process.returncode == 128 + signal.SIGINT
-    summary = runlog.read_summary(out)
+    summary = run_files.read_summary(out)
     assert summary["frames_planned"] == 2000000000 and summary["partial"] is True and summary["frame_count"] >= 2
 
 
@@ -195,10 +197,10 @@ def test_a_full_disk_under_summary_json_exits_2_and_leaves_a_consistent_run(blen
         result = run_phrt(["render", str(blend), "--out", str(disk / "run"), "--images", "none", *SMALL], tmp_path)
         assert_one_error_line(result, "is the disk full?")
         assert "No space left on device" in result[2][0]
-        summary = runlog.read_summary(disk / "run")
+        summary = run_files.read_summary(disk / "run")
         assert summary["partial"] is True and summary["frame_count"] < 60
         assert summary["frame_count"] == len(run_files.read_frames(disk / "run"))
-        assert (disk / "run" / runlog.FRAMES_CSV).read_text().count("\n") > 1 + summary["frame_count"]
+        assert (disk / "run" / schema.FRAMES_CSV).read_text().count("\n") > 1 + summary["frame_count"]
         assert not [path.name for path in (disk / "run").iterdir() if ".tmp-" in path.name]
         assert not (disk / "run" / ".phrt-lock").exists()
 
@@ -231,7 +233,7 @@ def test_an_unwritable_report_folder_exits_2(blend, tmp_path):
 
 
 def test_a_cluster_dashboard_binds_this_machine_only():
-    from phrt.phrt_addon import executors
+    from phrt.phrt_addon.runs import executors
     assert executors.DEFAULT_DASHBOARD.startswith("127.0.0.1:")
     with executors.DaskExecutor(workers=1, dashboard_address="127.0.0.1:0") as executor:
         assert executor.dashboard_link.startswith("http://127.0.0.1:")

@@ -15,7 +15,7 @@ import bpy  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
-from phrt.phrt_addon import runlog  # noqa: E402
+from phrt.phrt_addon.runs import run_files  # noqa: E402
 from phrt_render import save_moving_showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
@@ -78,7 +78,7 @@ def test_another_frame_range_redoes_every_run_and_says_why(sweeps):
     for run in RUNS:
         assert lines[run].startswith("done") and "redone: frames 1-3 -> 4-6" in lines[run], lines[run]
     assert lines["oracle"].startswith("done")
-    assert [row["frame"] for row in runlog.read_frames(folder / RUNS[0])] == [4, 5, 6]
+    assert [row["frame"] for row in run_files.read_frames(folder / RUNS[0])] == [4, 5, 6]
 
 
 def test_the_same_work_again_is_skipped(sweeps):
