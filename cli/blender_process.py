@@ -13,7 +13,7 @@ import os
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent
+ROOT = Path(__file__).resolve().parent.parent  # the repository (the extension root), not cli/
 SAMPLE_DIR = ROOT / "sample_scenes"
 
 
@@ -71,7 +71,7 @@ def sample_is_stale(blend_path):
 def scene_file(name_or_path) -> Path | None:
     """The .blend file ``load_scene(name_or_path)`` opens (a sample scene built first if missing or
     stale), None when there is none."""
-    from .sample_scenes import generate
+    from ..sample_scenes import generate
     path = Path(name_or_path)
     if path.suffix.lower() != ".blend" and name_or_path in generate.SCENES:
         path = SAMPLE_DIR / f"{name_or_path}.blend"

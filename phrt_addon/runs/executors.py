@@ -113,7 +113,7 @@ def _tls_configured() -> bool:
 
 def tls_security(ca_file, cert, key):
     """A ``distributed.security.Security`` for a client of a TLS cluster (encryption required)."""
-    _import_distributed()
+    import_distributed()
     from distributed.security import Security
     return Security(tls_ca_file=str(ca_file), tls_client_cert=str(cert), tls_client_key=str(key),
                     require_encryption=True)
