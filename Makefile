@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast test-compat bench paper soak extension scenes clean
+.PHONY: demo test test-fast test-compat bench paper soak faults extension scenes clean
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -46,6 +46,12 @@ paper: $(STAMP)
 # out/soak/soak.json.
 soak: $(STAMP)
 	$(PY) tools/soak.py --out out/soak
+
+# SIGKILL 20 replays at random moments (while an image, a CSV row or summary.json is being
+# written, or at a random time): every run folder must read back consistently and the report must
+# take it as partial (tools/faults.py; a 4-kill version runs in `make test`). ~5 min on 2 cores.
+faults: $(STAMP)
+	$(PY) tools/faults.py --kills 20 --out out/faults
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes

@@ -2,11 +2,12 @@
 
     phrt scenes [--out DIR]
     phrt render SCENE [--path NAME] [--frames A-B] [--mode raster|hybrid|raytrace]
-                      [--budget-ms T] [--resolution WxH] [--out DIR] [--images exr|png|none]
+                      [--budget-ms T] [--resolution WxH] [--out DIR] [--images exr|png|none] [--overwrite]
     phrt report RUN_DIR... [--reference RUN_DIR] [--out DIR]
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
-                     [--workers N | --scheduler ADDRESS]
+                     [--workers N [--dashboard ADDRESS] | --scheduler ADDRESS [--tls-ca-file F
+                     --tls-cert F --tls-key F]]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -55,6 +56,9 @@ def build_parser():
     render.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
     render.add_argument("--out", help="run directory (default: out/<scene>-<path>-<mode>/)")
     render.add_argument("--images", default="exr", type=str.lower, help="exr, png or none")
+    render.add_argument("--overwrite", action="store_true",
+                        help="replace the run --out holds (its files are removed first); without it such a folder "
+                             "is refused")
     report = commands.add_parser("report", help="error against run time for runs of the same path")
     report.add_argument("runs", nargs="+", metavar="RUN_DIR")
     report.add_argument("--reference", help="reference run (default: the raytrace run among RUN_DIRs)")
@@ -82,6 +86,12 @@ def build_parser():
                        help="run the plan on the existing Dask cluster whose scheduler is at ADDRESS "
                             "(tcp://HOST:8786); its workers need --resources phrt=1 and the sweep folder "
                             "(docs/cluster.md)")
+    sweep.add_argument("--dashboard", metavar="ADDRESS", default=None,
+                       help="where the LocalCluster of --workers serves its Dask dashboard (default 127.0.0.1:8787, "
+                            "this machine only; e.g. 0.0.0.0:8787 shows task names, paths and logs to the network)")
+    for flag, what in (("--tls-ca-file", "CA certificate(s)"), ("--tls-cert", "this client's certificate"),
+                       ("--tls-key", "this client's private key")):
+        sweep.add_argument(flag, metavar="FILE", help=f"{what} (PEM) for a tls:// --scheduler (docs/cluster.md)")
     return parser
 
 
@@ -206,7 +216,8 @@ def command_render(args):
         with _quiet_stdout():
             result = replay_module.replay(scene, camera, frame_range, args.mode, out, images=args.images,
                                           budget_ms=args.budget_ms, resolution=resolution, scene_label=label,
-                                          on_progress=progress, budget_at=args.budget_at)
+                                          on_progress=progress, budget_at=args.budget_at,
+                                          overwrite=args.overwrite)
     except camera_path.ReplayError as error:
         raise UserError(str(error)) from None
     for line in result.problems:  # each problem of the scene once, with its count
@@ -239,6 +250,8 @@ def command_report(args):
         files = report.build_report(args.runs, reference=args.reference, out_dir=args.out)
     except (ValueError, FileNotFoundError) as error:
         raise UserError(str(error).splitlines()[0]) from None
+    except OSError as error:  # a full disk, a read-only or vanished folder
+        raise UserError(f"cannot write the report to '{args.out}': {error.strerror or error}") from None
     print(f"phrt: report {files.markdown} and {files.html}")
     return 0
 
@@ -264,7 +277,8 @@ def _budget_fractions(args):
 def command_sweep(args):
     from ..phrt_addon.report import oracle as oracle_module
     from ..phrt_addon.runs import plan as plan_module
-    _check_executor_options(args.workers, args.scheduler)
+    from . import cluster
+    cluster_options = cluster.executor_options(args)
     fractions = _budget_fractions(args)
     variants = tuple(plan_module.VARIANTS)
     if args.variants is not None:
@@ -280,61 +294,36 @@ def command_sweep(args):
     folder = Path(args.out) if args.out else Path("out") / f"{label}-{camera.name}-sweep"
     _check_output_dir(folder)
     scene_ref = args.scene if Path(args.scene).suffix.lower() != ".blend" else str(Path(args.scene).resolve())
-    plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
-                                  oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
-    executor = _start_executor(args.workers, args.scheduler)
+    from ..phrt_addon.raster import gbuffer
+    problem = gbuffer.resolution_problem(*resolution)
+    if problem is not None:
+        raise UserError(problem)
+    try:
+        plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
+                                      oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
+    except plan_module.PlanError as error:
+        raise UserError(str(error)) from None
+    executor = cluster.start_executor(args.workers, args.scheduler, cluster_options)
     try:
         return _run_sweep(plan, folder, label, camera.name, frame_range, resolution, executor)
     finally:
-        _close_executor(executor)
-
-
-def _check_executor_options(workers, scheduler):
-    """UserError for --workers with --scheduler or a malformed scheduler address (loads nothing)."""
-    from ..phrt_addon.runs import executors
-    try:
-        executors.make_executor(workers, scheduler)
-    except executors.ExecutorError as error:
-        raise UserError(str(error)) from None
-
-
-def _start_executor(workers, scheduler):
-    """The executor of --workers / --scheduler, started (UserError when the cluster cannot run the
-    plan), its dashboard printed."""
-    from . import sweep as sweep_engine
-    from ..phrt_addon.runs import executors
-    try:
-        executor = sweep_engine.make_executor(workers, scheduler)
-        if isinstance(executor, executors.DaskExecutor):
-            executor.start()
-    except executors.ExecutorError as error:
-        raise UserError(str(error)) from None
-    if isinstance(executor, executors.DaskExecutor):
-        where = (f"a Dask LocalCluster of {workers} worker processes" if workers is not None
-                 else f"the Dask cluster at {executor.address}")
-        print(f"phrt: running on {where}; dashboard {executor.dashboard_link or 'not available'}", flush=True)
-    return executor
-
-
-def _close_executor(executor):
-    close = getattr(executor, "close", None)
-    if close is None:
-        return
-    close()
-    for pid, what in executor.worker_exits:
-        print(f"phrt: warning: Dask worker process {pid} {what}", file=sys.stderr)
+        cluster.close_executor(executor)
 
 
 def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, executor):
     from . import sweep as sweep_engine
     from ..phrt_addon.runs import executors
+    from ..phrt_addon.runs import progress as run_progress
     from ..phrt_addon.runs import plan as plan_module
-    plan_path = plan_module.write_plan(plan, folder)
+    try:
+        plan_path = plan_module.write_plan(plan, folder)
+    except OSError as error:
+        raise UserError(f"cannot write the plan to '{folder}': {error.strerror or error}") from None
     started = time.perf_counter()
     total = len(plan.jobs)
     print(f"phrt: sweep of {label}/{camera_name} frames {frame_range[0]}-{frame_range[1]} at "
           f"{resolution[0]}x{resolution[1]}: {len(plan.runs)} runs and the oracle -> {plan_path}", flush=True)
-    progress = executors.Progress(total, sys.stderr)
+    progress = run_progress.Progress(total, sys.stderr)
     counter = [0]
 
     def show(outcome):
@@ -354,6 +343,8 @@ def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, execut
         outcomes, files, no_report = sweep_engine.run_plan(plan_path, plan, executor, on_outcome=show)
     except executors.ExecutorError as error:
         raise UserError(str(error)) from None
+    except OSError as error:  # a full disk under the report
+        raise UserError(f"cannot write the sweep's report in '{folder}': {error.strerror or error}") from None
     failed = [outcome for outcome in outcomes if outcome.status == "failed"]
     if files is not None:
         complete = sum(plan_module.run_is_complete(folder / job.id, plan) for job in plan.runs)

@@ -13,7 +13,7 @@ import os
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent  # the repository (extension) root, above cli/
+ROOT = Path(__file__).resolve().parent.parent  # the repository (the extension root), not cli/
 SAMPLE_DIR = ROOT / "sample_scenes"
 
 
@@ -68,6 +68,44 @@ def sample_is_stale(blend_path):
     return compat.blend_file_version(blend_path) != tuple(bpy.app.version[:2])
 
 
+def scene_file(name_or_path) -> Path | None:
+    """The .blend file ``load_scene(name_or_path)`` opens (a sample scene built first if missing or
+    stale), None when there is none."""
+    from ..sample_scenes import generate
+    path = Path(name_or_path)
+    if path.suffix.lower() != ".blend" and name_or_path in generate.SCENES:
+        path = SAMPLE_DIR / f"{name_or_path}.blend"
+        blender()
+        if sample_is_stale(path):
+            with quiet_stdout():
+                generate.write_scene(name_or_path, SAMPLE_DIR)
+        return path
+    return path if path.is_file() else None
+
+
+def _open(bpy, path):
+    """Open a .blend with its scripts disabled whatever the user's preference (a file's registered
+    text blocks and scripted drivers are code from whoever made it); warn once when it has some."""
+    bpy.ops.wm.open_mainfile(filepath=str(path), use_scripts=False)
+    texts = [text.name for text in bpy.data.texts if text.use_module]
+    drivers = 0
+    for collection in (bpy.data.objects, bpy.data.meshes, bpy.data.materials, bpy.data.scenes, bpy.data.lights,
+                       bpy.data.cameras, bpy.data.worlds, bpy.data.node_groups, bpy.data.shape_keys):
+        for datablock in collection:
+            animation = getattr(datablock, "animation_data", None)
+            for curve in (animation.drivers if animation is not None else ()):
+                if curve.driver.type == "SCRIPTED" and not curve.driver.is_simple_expression:
+                    drivers += 1
+    if texts or drivers:
+        parts = [f"text block{'s' if len(texts) > 1 else ''} {', '.join(repr(name) for name in texts)} "
+                 f"(registered to run on load)"] if texts else []
+        if drivers:
+            parts.append(f"{drivers} scripted driver{'s' if drivers > 1 else ''}")
+        print(f"phrt: warning: '{path.name}' holds scripts that were not run: {' and '.join(parts)} "
+              f"(PHRT opens files with scripts disabled; the scene renders as if they were not there)",
+              file=sys.stderr)
+
+
 def load_scene(name_or_path):
     """Open a .blend file or a sample scene by name (built on first use); returns the scene's label."""
     from ..sample_scenes import generate
@@ -79,7 +117,7 @@ def load_scene(name_or_path):
             with quiet_stdout():
                 generate.write_scene(name_or_path, SAMPLE_DIR)
         with quiet_stdout():
-            bpy.ops.wm.open_mainfile(filepath=str(path))
+            _open(bpy, path)
         return name_or_path
     if not path.exists():
         raise UserError(f"no such file or sample scene '{name_or_path}': give a .blend file or one of "
@@ -98,7 +136,7 @@ def load_scene(name_or_path):
               f"Blender {bpy.app.version_string}: expect loss of data (save it from this version)", file=sys.stderr)
     try:
         with quiet_stdout():
-            bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
+            _open(bpy, path.resolve())
     except RuntimeError as error:
         raise UserError(f"cannot open '{name_or_path}': {str(error).strip().splitlines()[-1]}") from None
     return path.stem

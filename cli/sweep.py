@@ -5,8 +5,10 @@ given only the plan's path and a job id, so it can run in this process
 (``LocalExecutor``) or in a worker process elsewhere (``DaskExecutor``, from
 :func:`make_executor`).  It skips a complete job, writes the job's directory
 under a temporary name and renames it when the job is complete.  Bad input
-(a missing .blend or camera path) makes a failed outcome with its one-line
-message; anything else raises, and a Dask executor retries it.
+(a missing .blend or camera path, an unsafe job id) makes a failed outcome with its one-line
+message; anything else raises, and a Dask executor retries it.  A run is skipped only when its
+recorded work is the job's (``plan.run_redo_reason``): otherwise it is redone and its outcome
+says why (``redone: frames 1-3 -> 4-6``).
 :func:`run_plan` runs a plan's jobs and writes the report of its runs.
 """
 from __future__ import annotations
@@ -60,15 +62,22 @@ def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
     """Run job ``job_id`` of the plan at ``plan_path`` unless it is complete."""
     plan_path = Path(plan_path)
     folder = plan_path.parent
-    plan = plan_module.read_plan(plan_path)
-    job = plan.job(job_id)
-    if plan_module.job_is_complete(plan, folder, job):
-        return plan_module.JobOutcome(job.id, "skipped", message="complete")
     begin = time.perf_counter()
-    for stale in folder.glob(f".{job.id}.partial-*"):  # what an attempt that died left
-        shutil.rmtree(stale, ignore_errors=True)
-    partial = plan_module.partial_dir(folder, job)
     try:
+        plan = plan_module.read_plan(plan_path)
+        job = plan.job(plan_module.check_job_id(job_id))
+        redo = None
+        if job.kind == "run":
+            scene_name, _, _ = plan.target(job)
+            wanted = plan_module.wanted_work(plan, job, blender_process.scene_file(scene_name))
+            redo = plan_module.run_redo_reason(folder / job.id, plan, wanted)
+            if redo is None:
+                return plan_module.JobOutcome(job.id, "skipped", message="complete")
+        elif plan_module.job_is_complete(plan, folder, job):
+            return plan_module.JobOutcome(job.id, "skipped", message="complete")
+        for stale in plan_module.dead_attempts(folder, job):  # what an attempt that died left
+            shutil.rmtree(plan_module.inside(folder, stale), ignore_errors=True)
+        partial = plan_module.partial_dir(folder, job)
         scene, camera = _open_scene(plan, job)
         try:
             with blender_process.quiet_stdout():
@@ -77,9 +86,12 @@ def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
         except BaseException:
             shutil.rmtree(partial, ignore_errors=True)
             raise
-    except (blender_process.UserError, camera_path.ReplayError) as error:  # bad input: retrying cannot help
-        return plan_module.JobOutcome(job.id, "failed", time.perf_counter() - begin,
+    except (blender_process.UserError, camera_path.ReplayError, plan_module.PlanError) as error:
+        # bad input: retrying cannot help
+        return plan_module.JobOutcome(job_id, "failed", time.perf_counter() - begin,
                                       str(error).strip().splitlines()[0])
+    if redo not in (None, "no run yet"):
+        message = f"redone: {redo}; {message}"
     return plan_module.JobOutcome(job.id, "done", time.perf_counter() - begin, message)
 
 
@@ -144,4 +156,4 @@ def run_plan(plan_path, plan, executor, on_outcome=None):
                                     oracle_dir=folder / oracle_module.ORACLE_DIR, failures=failures)
     except ValueError as error:
         return outcomes, None, str(error).splitlines()[0]
-    return outcomes, files, None
+    return outcomes, files, None  # OSError (a full disk) propagates: the caller says it in one line

@@ -53,7 +53,8 @@ def candidate_entries(scene, rows) -> list:
             name = naming.material_element(obj.name, material.name)
             entries[name] = _settings_entry(name, obj.name, material.name, material.phrt, True)
         if not materials or any(m is None or not m.phrt.candidate for m in materials):
-            entries[obj.name] = _settings_entry(obj.name, obj.name, "", obj.phrt, obj.phrt.candidate)
+            name = naming.object_element(obj.name)
+            entries[name] = _settings_entry(name, obj.name, "", obj.phrt, obj.phrt.candidate)
     objects = bpy.data.objects
     for row in rows:
         name = str(row["element"])

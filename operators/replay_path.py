@@ -18,7 +18,7 @@ docs/batch.md has the ``blender -b`` command lines.
 from pathlib import Path
 
 import bpy
-from bpy.props import EnumProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ..engine import candidate_list
 from ..engine.runs import replay
@@ -92,6 +92,11 @@ class PHRT_OT_replay_path(bpy.types.Operator):
         name="Images", items=IMAGE_ITEMS, default="EXR",
         description="Image format of the rendered frames",
     )
+    overwrite: BoolProperty(
+        name="Overwrite", default=True,
+        description="Replace the run a run folder already holds (its files are removed first); off, such a "
+                    "folder is refused.  A folder another replay is writing is always refused",
+    )
 
     # -- planning ---------------------------------------------------------------
     def _resolve(self, context):
@@ -136,7 +141,8 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                               f"({frame_ms:.0f} ms)", flush=True)
                 results.append(replay.replay(
                     scene, camera, frame_range, mode, self._run_dir(context, camera, mode, root),
-                    images=self.images.lower(), scene_label=scene_label(scene), on_progress=progress))
+                    images=self.images.lower(), scene_label=scene_label(scene), on_progress=progress,
+                    overwrite=self.overwrite))
                 if results[-1].signal:  # SIGINT / SIGTERM (blender -b): no further mode
                     break
         except (camera_path.ReplayError, RuntimeError) as error:
@@ -188,7 +194,8 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                 mode = self._modes[self._mode_index]
                 self._run = SteppedReplay(context.scene, self._camera, self._frame_range, mode,
                                           self._run_dir(context, self._camera, mode, self._root),
-                                          images=self.images.lower(), scene_label=scene_label(context.scene))
+                                          images=self.images.lower(), scene_label=scene_label(context.scene),
+                                          overwrite=self.overwrite)
             stats = self._run.step()
             done = self._mode_index * self._frames_per_mode + self._run.done
             context.window_manager.progress_update(done)

@@ -17,7 +17,7 @@ from bpy.props import StringProperty
 from ..engine import session
 from ..phrt_addon.runs import run_log
 from ..phrt_addon import schema
-from ..phrt_addon.runs import run_files
+from ..phrt_addon.runs import atomic, run_files
 from ..properties import BLEND_RELATIVE_PATH
 
 FORMATS = (".csv", ".json")
@@ -58,14 +58,14 @@ def write_selection_log(rows, filepath) -> Path:
     if not path.parent.is_dir():
         raise SelectionLogError(f"cannot write '{path}': the folder '{path.parent}' does not exist")
     try:
-        if suffix == ".csv":
-            with open(path, "w", newline="", encoding="utf-8") as handle:
+        if suffix == ".csv":  # under a temporary name, renamed once whole (runs/atomic.py)
+            with atomic.atomic_open(path, "w", newline="") as handle:
                 writer = csv.writer(handle, lineterminator="\n")
                 writer.writerow(columns)
                 writer.writerows([run_log.format_value(row.get(column)) for column in columns] for row in rows)
         else:
             data = [{column: _json_value(column, row.get(column)) for column in columns} for row in rows]
-            path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+            atomic.write_text(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
     except OSError as error:
         raise SelectionLogError(f"cannot write '{path}': {error.strerror or error}") from None
     return path

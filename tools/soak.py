@@ -153,7 +153,7 @@ def long_replay(args, counter, out):
     with cli._quiet_stdout():  # Blender's "Saved: ..." line per frame
         result = replay.replay(scene, camera, frames, "HYBRID", out / f"{label}-{camera.name}-hybrid",
                                images="exr", budget_ms=args.budget_ms, resolution=args.resolution,
-                               scene_label=label, on_progress=progress)
+                               scene_label=label, on_progress=progress, overwrite=True)
     wall_s = time.perf_counter() - started
     final.release_caches()
     alive_after = counter.collect()
@@ -229,7 +229,7 @@ def big_mesh(args, counter, out):
         try:
             with cli._quiet_stdout():
                 replay.replay(scene, scene.camera, (1, 2), mode, out / f"big-{mode.lower()}", images="exr",
-                              budget_ms=1e9 if mode != "RASTER" else None, scene_label="big")
+                              budget_ms=1e9 if mode != "RASTER" else None, scene_label="big", overwrite=True)
         except camera_path.ReplayError as error:
             runs[mode] = {"refused": str(error)}
             continue

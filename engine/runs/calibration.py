@@ -12,8 +12,8 @@ import tempfile
 from pathlib import Path
 
 from ...phrt_addon.select import mode_budgets
-from ...phrt_addon.runs import run_log
 from ...phrt_addon.runs import run_files
+from ...phrt_addon.runs import summary as run_summary
 from .. import extract
 
 # Measured frames per mode (after one warm-up frame): a few seconds at 640x480 here.
@@ -47,7 +47,7 @@ def resolve(scene, camera, frame_range, fraction, *, runner, resolution=None, sc
     width, height = resolution if resolution is not None else extract.resolution(scene)
     label = scene_label or scene.name
     runs = mode_budgets.find_reference_runs(search_dirs, label, camera.name, (width, height),
-                                      run_log.machine_info()["cpu_model"])
+                                            run_summary.machine_info()["cpu_model"])
     if runs is not None:
         return mode_budgets.from_runs(fraction, *runs)
     return calibrate(scene, camera, frame_range, fraction, runner=runner, resolution=resolution,

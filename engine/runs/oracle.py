@@ -83,7 +83,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
     frames = oracle.sampled_frames(reference_frames, every)
     runs = {label: {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_files.read_frames(run_dir)},
                     "selected": _selection_by_frame(run_dir)} for label, run_dir in hybrid_dirs.items()}
-    measured, regret_rows = [], []
+    measured, regret_rows, capped = [], [], {}
     with ForcedRenderer(scene, camera, resolution) as renderer:
         for count, frame in enumerate(frames):
             reference_path = run_files.frame_image_path(reference_dir, frame)
@@ -96,7 +96,10 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
                 renderer.render(frame, _competing(warm))
             raster, _, selection = renderer.render(frame, ())
             flip_raster = metrics.flip(reference, raster)
-            names = _competing(selection)
+            competing = _competing(selection)
+            names, cut = oracle.cap_candidates(competing, _relevance(selection, competing), seed=frame)
+            if cut:
+                capped[str(frame)] = [len(names), len(competing)]
             cost, alone, area = [], [], []
             images = {frozenset(): raster}
             for name in names:
@@ -141,7 +144,14 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
             if on_progress is not None:
                 on_progress(count + 1, len(frames))
     return oracle.write_results(out_dir, every, frames, measured, regret_rows,
-                                {label: run["dir"] for label, run in runs.items()})
+                                {label: run["dir"] for label, run in runs.items()}, capped=capped)
+
+
+def _relevance(selection, names) -> list:
+    """The selection's own estimate (relevance R) of each of ``names``."""
+    index = {name: position for position, name in enumerate(selection.names)}
+    relevance = selection.terms.relevance
+    return [float(relevance[index[name]]) for name in names]
 
 
 def _competing(selection) -> list:

@@ -10,10 +10,16 @@ replay carries (Embree scenes uploaded once, cost model, last selection) held
 by a ``ReplaySession``; after each frame the image is written and the logs are
 flushed, so a cancelled replay leaves complete frames and logs only.
 
+A run folder has one writer (``.phrt-lock``, ``runs/lock.py``): a second replay into a live
+run's folder is refused, a dead writer's lock taken over.  A folder holding another run is
+reused only with ``overwrite=True`` (``--overwrite``), which removes that run's files first
+(``runs/folder.py``).
+
 Nothing half-written ever carries a final name: an image is written as
-``frames/.NNNN.partial.<ext>``, checked to be complete (``runlog.image_is_complete``:
+``frames/.NNNN.partial-HOST-PID.<ext>``, checked to be complete (``run_files.image_is_complete``:
 a full disk makes Blender's writers stop early without an error) and renamed;
-``summary.json`` is written to a temporary name and renamed.  Cancelled (Esc,
+``summary.json`` exists from the start (``"partial": true``), is rewritten as frames complete
+and is the run's commit record (``phrt_addon/runs/run_log.py``).  Cancelled (Esc,
 ``should_stop``), interrupted (SIGINT, SIGTERM: the frame being rendered is
 finished first) or failed (a full disk) runs still get a ``summary.json`` with
 ``"partial": true`` (and ``"error"`` when they failed), if the disk takes it.
@@ -30,9 +36,11 @@ from pathlib import Path
 import bpy
 
 from ... import compat
+from ...phrt_addon.raster import gbuffer
 from ...phrt_addon.runs import run_log
 from ...phrt_addon import schema
-from ...phrt_addon.runs import run_files
+from ...phrt_addon.runs import folder as run_folder
+from ...phrt_addon.runs import lock, run_files, work
 from ...phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from .. import extract, final
 from .camera_path import ReplayError
@@ -91,7 +99,7 @@ class SteppedReplay:
 
     def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
                  resolution=None, scene_label=None, budget_at=None, budget_search_dirs=None,
-                 overrides=None, frame_list=None):
+                 overrides=None, frame_list=None, overwrite=False):
         mode = mode.upper()
         if mode not in MODES:
             raise ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in MODES)}")
@@ -105,6 +113,7 @@ class SteppedReplay:
         if budget_at is not None and not 0.0 <= budget_at <= 1.0:
             raise ReplayError(f"budget-at must be a fraction within 0..1 (0 = raster, 1 = ray traced frame "
                               f"time), not {budget_at}")
+        requested_budget_ms = budget_ms
         settings = extract.read_settings(scene)
         for key, value in (overrides or {}).items():
             if not hasattr(settings, key):
@@ -124,16 +133,26 @@ class SteppedReplay:
             budget_source = resolved.as_summary()
         self.run_dir = Path(run_dir)
         self.frames_dir = self.run_dir / schema.FRAMES_DIR
+        width, height = resolution if resolution is not None else extract.resolution(scene)
+        problem = gbuffer.resolution_problem(width, height)
+        if problem is not None:
+            raise ReplayError(problem)
+        try:
+            self._lock = run_folder.take(self.run_dir, overwrite)
+        except run_folder.FolderError as error:
+            raise ReplayError(str(error)) from None
         try:
             self.frames_dir.mkdir(parents=True, exist_ok=True)
-            probe = self.run_dir / ".phrt-write-test"
-            probe.write_text("")
-            probe.unlink()
         except OSError as error:
+            self._lock.release()
             raise ReplayError(f"cannot write to output folder '{self.run_dir}': "
-                                     f"{error.strerror or error}") from None
+                              f"{error.strerror or error}") from None
+        self._work = work.work_record(bpy.data.filepath or None, (start, end), (width, height), mode=mode,
+                                      images=images, budget_ms=requested_budget_ms, budget_at=fraction,
+                                      overrides=overrides)
         self.scene, self.mode, self.images = scene, mode, images
-        self.frames = list(range(start, end + 1)) if frame_list is None else [int(f) for f in frame_list]
+        # A range is lazy: --frames 1-2000000000 holds no list of two billion frames.
+        self.frames = range(start, end + 1) if frame_list is None else [int(f) for f in frame_list]
         self.done = 0
         self.settings = settings
         self.settings.mode = mode
@@ -154,7 +173,6 @@ class SteppedReplay:
             render.resolution_percentage = 100
         _set_image_format(scene, images)
         render.use_file_extension = True
-        width, height = extract.resolution(scene)
         # Everything summary.json needs, read now: finish() may run when the scene is gone.
         self._summary = {
             "scene": scene_label or scene.name, "path": camera.name, "resolution": [width, height],
@@ -164,8 +182,20 @@ class SteppedReplay:
             "relevance": str(self.settings.relevance).lower(),
             "selection_order": str(self.settings.selection_order).lower(),
             "budget_at": fraction if mode == "HYBRID" and budget_source is not None else None,
-            "budget_source": budget_source, **versions()}
-        self.log = run_log.RunLog(self.run_dir, extra_frame_columns=EXTRA_FRAME_COLUMNS)
+            "budget_source": budget_source, "work": self._work, **versions()}
+        try:
+            self.log = run_log.RunLog(self.run_dir, extra_frame_columns=EXTRA_FRAME_COLUMNS,
+                                     facts={**self._summary, "mode": mode, "budget_ms": self.settings.budget_ms,
+                                            "frames_planned": self.total, "cancelled": False})
+        except OSError as error:
+            self._lock.release()
+            self._restore()
+            raise ReplayError(f"cannot write the run in '{self.run_dir}': {error.strerror or error} "
+                              f"(is the disk full?)") from None
+        except BaseException:
+            self._lock.release()
+            self._restore()
+            raise
         self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
         self._open = True
 
@@ -219,10 +249,10 @@ class SteppedReplay:
         return result.stats
 
     def _partial_image(self, frame) -> Path:
-        return self.frames_dir / f".{frame:04d}.partial"
+        return self.frames_dir / f".{frame:04d}.partial-{lock.owner_tag()}"
 
     def _drop_partial_images(self, frame):
-        for image in self.frames_dir.glob(f".{frame:04d}.partial*"):
+        for image in self.frames_dir.glob(f".{frame:04d}.partial-{lock.owner_tag()}*"):
             image.unlink(missing_ok=True)
 
     def _commit_image(self, frame, blender_said=None):
@@ -230,7 +260,7 @@ class SteppedReplay:
         leaves a file that ends early, with no error from Blender (or only a line on stderr, on
         4.5): it is removed and reported in one line."""
         extension = ".exr" if self.images == "exr" else ".png"
-        partial = self.frames_dir / f".{frame:04d}.partial{extension}"
+        partial = self.frames_dir / f"{self._partial_image(frame).name}{extension}"
         if not run_files.image_is_complete(partial):
             self._drop_partial_images(frame)
             reason = blender_said.reason() if blender_said is not None else ""
@@ -280,6 +310,7 @@ class SteppedReplay:
         try:
             written = self.log.close(summary)
         finally:
+            self._lock.release()
             self.session.__exit__(None, None, None)
             if restore_scene:
                 self._restore()
@@ -308,7 +339,7 @@ def _scene_budget_ms(scene, default):
 
 def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None, resolution=None,
            scene_label=None, on_progress=None, should_stop=None, budget_at=None, budget_search_dirs=None,
-           overrides=None) -> ReplayResult:
+           overrides=None, overwrite=False) -> ReplayResult:
     """Render ``frame_range`` of ``camera`` in ``mode`` into ``run_dir``.
 
     ``on_progress(done, total, frame_ms)`` is called after each frame;
@@ -317,10 +348,11 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
     At) is resolved to milliseconds from complete raster and raytrace runs of the path in
     ``budget_search_dirs`` (default: beside ``run_dir``) or by a short calibration, reported in
     ``summary.json`` (``budget_source``).  ``overrides`` sets fields of the scene's settings
-    (``phrt_addon.scene.Settings``) for this replay only."""
+    (``phrt_addon.scene.Settings``) for this replay only.  ``overwrite`` lets the replay replace
+    another run in ``run_dir`` (its files are removed first); without it such a folder is refused."""
     run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
                         resolution=resolution, scene_label=scene_label, budget_at=budget_at,
-                        budget_search_dirs=budget_search_dirs, overrides=overrides)
+                        budget_search_dirs=budget_search_dirs, overrides=overrides, overwrite=overwrite)
     cancelled = False
     received = []
     with stop_on_signals(received):

@@ -11,6 +11,7 @@ that float32 keeps its precision at huge world coordinates.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,3 +171,39 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     depth_count = np.bincount(flat[finite], minlength=size)[:n_elements]
     depth = np.where(depth_count > 0, depth_sum / np.maximum(depth_count, 1), np.inf)
     return counts, centre, depth
+
+
+# Bytes per pixel of a G-buffer: two layers (covered bool; position, normal, albedo and the
+# geometric normal float32x3; roughness, metallic float32; material, element int32) and the
+# view depth (float32).
+GBUFFER_BYTES_PER_PIXEL = 2 * (1 + 4 * 3 * 4 + 2 * 4 + 2 * 4) + 4
+
+
+def gbuffer_bytes(width: int, height: int) -> int:
+    return int(width) * int(height) * GBUFFER_BYTES_PER_PIXEL
+
+
+def memory_available_bytes() -> int | None:
+    """Memory this machine can still give (MemAvailable of /proc/meminfo, else physical pages)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def resolution_problem(width: int, height: int, available: int | None = None) -> str | None:
+    """Why a ``width`` x ``height`` frame cannot be rendered here (its G-buffer alone would not fit
+    in the memory available), or None."""
+    available = memory_available_bytes() if available is None else available
+    needed = gbuffer_bytes(width, height)
+    if available is None or needed <= available:
+        return None
+    return (f"resolution {width}x{height} needs about {needed / 2**30:.1f} GiB for its G-buffer alone, more than "
+            f"the {available / 2**30:.1f} GiB of memory available: give a smaller --resolution")

@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from . import oracle
+from ..runs import atomic
 from .document import ReportTable, report_sections
 from .markup import to_html, to_markdown
 from .plots import plot_error_vs_time, plot_selection_quality, plot_timeline
@@ -74,6 +75,6 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
             "Failed jobs", ["Job", "Why"], [[job, message] for job, message in failures],
             "Jobs of the plan that ended without a result (after their retries); the report covers the "
             "others. Running the plan again retries them."))]
-    files.markdown.write_text(to_markdown(sections), encoding="utf-8")
-    files.html.write_text(to_html(sections), encoding="utf-8")
+    atomic.write_text(files.markdown, to_markdown(sections))
+    atomic.write_text(files.html, to_html(sections))
     return files

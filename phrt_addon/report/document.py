@@ -72,6 +72,13 @@ def report_sections(runs, groups, references, errors, files, rows=None, regrets=
     items = [("h1", "PHRT report")]
     items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are "
                        f"means over the frames of each run, in milliseconds."))
+    partial = [run for run in runs if run.summary.get("partial")]
+    if partial:
+        items.append(("p", "Partial runs (stopped, killed or failed before their last frame; the report uses the "
+                           "frames their summary.json commits): " + "; ".join(
+                               f"{run.label} ({len(run.frames)} of {run.summary.get('frames_planned', '?')} frames"
+                               f"{': ' + str(run.summary['error']) if run.summary.get('error') else ''})"
+                               for run in partial) + "."))
 
     items.append(("table", ReportTable(
         "Render times (ms per frame), after the paper's Table II",
@@ -93,7 +100,8 @@ def report_sections(runs, groups, references, errors, files, rows=None, regrets=
                   if budget and total.size and run.mode == "HYBRID" else "–")
         run_rows.append([
             run.label, f"{run.scene} / {run.path}", run.mode.lower(),
-            _number(budget, "g"), str(len(run.frames)), _ms(run.mean("total_ms")),
+            _number(budget, "g"), str(len(run.frames)) + (" (partial)" if run.summary.get("partial") else ""),
+            _ms(run.mean("total_ms")),
             _ms(run.percentile("total_ms", 50)), _ms(run.percentile("total_ms", 95)),
             _ms(float(total.max()) if total.size else None),
             _ms(run.mean("raster_ms")), _ms(run.mean("select_ms")), _ms(run.mean("trace_ms")),
@@ -137,7 +145,7 @@ def report_sections(runs, groups, references, errors, files, rows=None, regrets=
 
     stability_rows = []
     for run in runs:
-        rates = run_log.flips_per_element_per_100(run.selection)
+        rates = run.selection.flips_per_element_per_100()
         worst = sorted(((rate, element) for element, rate in rates.items() if rate > 0),
                        key=lambda item: (-item[0], item[1]))[:WORST_ELEMENTS]
         values = np.array(list(rates.values()), dtype=float)
@@ -237,6 +245,13 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
         every = oracle_results.info.get("every") if oracle_results is not None else oracle.DEFAULT_EVERY
         link = (f" Per frame: [{oracle.REGRET_CSV}]({oracle.REGRET_CSV}); each candidate's measured benefit "
                 f"and cost: [{oracle.CANDIDATES_CSV}]({oracle.CANDIDATES_CSV})." if oracle_results is not None else "")
+        capped = (oracle_results.info.get("capped") or {}) if oracle_results is not None else {}
+        if capped:
+            judged = sum(pair[0] for pair in capped.values())
+            total = sum(pair[1] for pair in capped.values())
+            link += (f" The oracle was capped on {len(capped)} sampled frame(s): it judged {judged} of their {total} "
+                     f"candidates (the most relevant by the selection's own estimate plus a few at random), so "
+                     f"its choice there is among those only.")
         items.append(("table", ReportTable(
             "Regret against the oracle",
             ["Run", "Selection", "Budget ms", "Sampled frames", "Heuristic LDR-FLIP", "Oracle LDR-FLIP",
@@ -262,7 +277,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                 continue
             per_element = pop.per_element()
             worst = sorted(per_element.items(), key=lambda item: (-item[1][1], item[0]))[:WORST_ELEMENTS]
-            rates = np.array(list(run_log.flips_per_element_per_100(run.selection).values()), dtype=float)
+            rates = np.array(list(run.selection.flips_per_element_per_100().values()), dtype=float)
             pop_rows.append([
                 run.label, run.mode.lower(), str(len(pop.pops)),
                 _number(float(rates.mean()) if rates.size else None, ".2f"),

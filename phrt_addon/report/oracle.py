@@ -42,7 +42,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,6 +49,7 @@ import numpy as np
 
 from ..runs import run_log
 from .. import schema
+from ..runs import atomic
 
 ORACLE_DIR = "oracle"
 ORACLE_JSON = "oracle.json"
@@ -63,6 +63,32 @@ REGRET_COLUMNS = ("run", "frame", "time_left_ms", "capacity_ms", "heuristic_flip
                   "oracle_benefit", "heuristic_benefit")
 # Knapsack search nodes before giving up exactness (never reached with a frame's candidates).
 MAX_NODES = 2_000_000
+
+
+# Candidates the oracle judges per sampled frame (each costs a render): the most valuable by the
+# selection's own estimate, plus a few drawn at random from the rest (what the estimate misjudges).
+MAX_CANDIDATES = 48
+RANDOM_CANDIDATES = 8
+
+
+def cap_candidates(names, estimates, cap: int = MAX_CANDIDATES, random_extra: int = RANDOM_CANDIDATES,
+                   seed: int = 0) -> tuple[list, bool]:
+    """At most ``cap`` of ``names``: the ``cap - random_extra`` with the largest ``estimates`` (the
+    selection's relevance R), then ``random_extra`` drawn from the others (``seed``: the frame, so
+    a rerun judges the same ones), in their original order; and whether any was left out."""
+    names = list(names)
+    if cap < 1:
+        raise ValueError(f"the oracle needs to judge at least 1 candidate per frame, not {cap}")
+    if len(names) <= cap:
+        return names, False
+    values = np.nan_to_num(np.asarray(estimates, dtype=np.float64), nan=-np.inf)
+    top = max(cap - max(random_extra, 0), 0)
+    order = np.argsort(-values, kind="stable")
+    kept = set(order[:top].tolist())
+    rest = np.array(sorted(set(range(len(names))) - kept))
+    drawn = np.random.default_rng(seed).choice(rest, size=min(cap - top, len(rest)), replace=False)
+    kept.update(drawn.tolist())
+    return [names[index] for index in sorted(kept)], True
 
 
 def sampled_frames(frames, every: int = DEFAULT_EVERY) -> list[int]:
@@ -194,13 +220,11 @@ def _joined(names) -> str:
 def write_csv(path, columns, rows):
     """Rows (dicts) as a CSV through a temporary file (numbers as in the run logs)."""
     path = Path(path)
-    temporary = path.with_name(path.name + ".tmp")
-    with open(temporary, "w", newline="", encoding="utf-8") as handle:
+    with atomic.atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(columns)
         for row in rows:
             writer.writerow([run_log.format_value(row.get(key)) for key in columns])
-    os.replace(temporary, path)
 
 
 def read_csv(path) -> list:
@@ -266,7 +290,7 @@ def regret_row(run_label, frame, time_left_ms, heuristic_set, heuristic_flip, or
             "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
 
 
-def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note=""):
+def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None):
     """Write the oracle folder's three files (``oracle.json`` last: it marks completion)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -288,11 +312,9 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
             "frames_oracle_differs": sum(1 for row in rows if row["oracle"] != row["heuristic"]),
         }
     info = run_log._round_json(run_log._json_safe({
-        "every": every, "frames": list(frames), "runs": runs,
+        "every": every, "frames": list(frames), "runs": runs, "capped": capped or {},
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         "reference, an exact knapsack on measured benefit and cost within each run's own time left"}))
-    temporary = folder / (ORACLE_JSON + ".tmp")
-    temporary.write_text(json.dumps(info, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    os.replace(temporary, folder / ORACLE_JSON)
+    atomic.write_text(folder / ORACLE_JSON, json.dumps(info, indent=2, allow_nan=False) + "\n")
     return info

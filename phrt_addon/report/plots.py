@@ -2,6 +2,7 @@
 """
 import numpy as np
 
+from ..runs import atomic
 from .runs import BASELINE_VARIANT, pareto_front
 from .selection import variant_label
 
@@ -24,7 +25,7 @@ def plot_error_vs_time(path, groups, errors):
         _plot_curves(panels[row, 1], group, members, errors, "relmse",
                      "mean relMSE against the reference (lower is better)")
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
+    atomic.save_figure(figure, path, dpi=100)
     return figure
 
 
@@ -128,7 +129,7 @@ def plot_selection_quality(path, groups, regrets, pops):
                 axes.text(0.5, 0.5, "not measured (see the report's notes)", ha="center", va="center",
                           transform=axes.transAxes)
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
+    atomic.save_figure(figure, path, dpi=100)
     return figure
 
 
@@ -167,5 +168,5 @@ def plot_timeline(path, groups):
         selected_axes.grid(True, alpha=0.3)
         selected_axes.sharex(time_axes)
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
+    atomic.save_figure(figure, path, dpi=110)
     return figure

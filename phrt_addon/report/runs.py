@@ -14,7 +14,7 @@ from .. import defaults
 from . import metrics
 from ..runs import run_log
 from .. import schema
-from ..runs import run_files
+from ..runs import atomic, run_files
 
 
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
@@ -57,7 +57,8 @@ class Run:
     label: str
     summary: dict
     frames: list
-    selection: list
+    selection: run_files.SelectionStates  # streamed from selection.csv once, kept compact
+    images: dict = field(default_factory=dict)  # {frame: path}: only the images the summary commits
 
     @property
     def scene(self):
@@ -105,11 +106,11 @@ class Run:
         return float(np.percentile(values, q)) if values.size else None
 
     def image(self, frame):
-        return run_files.frame_image_path(self.run_dir, frame)
+        return self.images.get(frame)
 
     @property
     def has_images(self):
-        return any(self.image(row["frame"]) is not None for row in self.frames)
+        return bool(self.images)
 
 
 @dataclass
@@ -155,15 +156,16 @@ def load_run(run_dir):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ValueError(f"{run_dir} is not a directory: give a RUN_DIR written by 'phrt render'")
-    if not (run_dir / schema.FRAMES_CSV).exists():
+    if not (run_dir / schema.FRAMES_CSV).exists() and not (run_dir / schema.SUMMARY_JSON).exists():
         raise ValueError(f"{run_dir} has no {schema.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
     try:
         summary = run_files.read_summary(run_dir)
     except FileNotFoundError:
-        raise ValueError(f"{run_dir} has no {schema.SUMMARY_JSON}: the run did not finish; "
-                         f"render it again") from None
-    return Run(run_dir=run_dir, label=run_dir.name, summary=summary,
-               frames=run_files.read_frames(run_dir), selection=run_files.read_selection(run_dir))
+        raise ValueError(f"{run_dir} has no {schema.SUMMARY_JSON}: it holds no run; render it again") from None
+    except ValueError:
+        raise ValueError(f"{run_dir}/{schema.SUMMARY_JSON} cannot be read: render the run again") from None
+    return Run(run_dir=run_dir, label=run_dir.name, summary=summary, frames=run_files.read_frames(run_dir, summary),
+               selection=run_files.SelectionStates(run_dir, summary), images=run_files.run_images(run_dir, summary))
 
 
 def pareto_front(times_ms, errors):
@@ -265,7 +267,7 @@ def measure_group(members, reference):
 
 
 def write_errors_csv(path, runs, errors):
-    with open(path, "w", newline="", encoding="utf-8") as handle:
+    with atomic.atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(ERROR_COLUMNS)
         for run in runs:

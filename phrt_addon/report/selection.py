@@ -2,7 +2,6 @@
 """
 import csv
 import json
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -10,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from . import oracle, popping
-from ..runs import run_log
+from ..runs import atomic, run_log
 from .runs import METRIC_THREADS, SWEEP_COLUMNS
 
 
@@ -134,7 +133,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
         regret = regrets.get(id(run))
         pop = pops.get(id(run))
         hybrid = run.mode == "HYBRID"
-        rates = np.array(list(run_log.flips_per_element_per_100(run.selection).values()), dtype=float)
+        rates = np.array(list(run.selection.flips_per_element_per_100().values()), dtype=float)
         cost_mode, weight, order, relevance = run.variant
         rows.append({
             "run": run.label, "mode": run.mode, "cost_mode": cost_mode if hybrid else None,
@@ -157,18 +156,14 @@ def sweep_rows(runs, errors, regrets, pops, references):
 
 
 def write_sweep(csv_path, json_path, rows, oracle_results):
-    temporary = csv_path.with_name(csv_path.name + ".tmp")
-    with open(temporary, "w", newline="", encoding="utf-8") as handle:
+    with atomic.atomic_open(csv_path, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(SWEEP_COLUMNS)
         for row in rows:
             writer.writerow([run_log.format_value(row[key]) for key in SWEEP_COLUMNS])
-    os.replace(temporary, csv_path)
     document = {"columns": list(SWEEP_COLUMNS), "runs": [{key: row[key] for key in SWEEP_COLUMNS} for row in rows],
                 "oracle": None if oracle_results is None else {
                     "every": oracle_results.info.get("every"), "frames": oracle_results.info.get("frames"),
                     "note": oracle_results.info.get("note")}}
     document = run_log._round_json(run_log._json_safe(document))
-    temporary = json_path.with_name(json_path.name + ".tmp")
-    temporary.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    os.replace(temporary, json_path)
+    atomic.write_text(json_path, json.dumps(document, indent=2, allow_nan=False) + "\n")

@@ -1,4 +1,4 @@
-"""Running a plan's jobs on a Dask cluster, and the progress line of a plan's run.
+"""Running a plan's jobs on a Dask cluster (the progress line of a plan's run: ``runs/progress.py``).
 
 :class:`DaskExecutor` has the interface of ``plan.LocalExecutor``
 (``run(plan_path, plan, execute, on_outcome)``): each job of the plan is one
@@ -38,7 +38,6 @@ import os
 import re
 import socket
 import threading
-import time
 import uuid
 import warnings
 from dataclasses import replace
@@ -49,7 +48,8 @@ from .plan import JobOutcome
 RESOURCE = "phrt"  # each worker has phrt=1; each job asks for phrt=1: one replay at a time per worker
 RETRIES = 2
 CONNECT_TIMEOUT_S = 10
-DEFAULT_DASHBOARD = ":8787"
+DEFAULT_DASHBOARD = "127.0.0.1:8787"  # this machine only: the dashboard shows task names, paths and logs
+LOCAL_HOST = "127.0.0.1"  # a LocalCluster's scheduler and workers listen here only
 PIP_DASK = "dask[distributed,diagnostics]==2026.8.0"
 _ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
 
@@ -65,6 +65,58 @@ def check_scheduler_address(address: str) -> str:
         raise ExecutorError(f"malformed scheduler address '{address}': give tcp://HOST:PORT, e.g. "
                             f"--scheduler tcp://render1:8786")
     return address
+
+
+def executor_options(workers=None, scheduler=None, dashboard=None, tls_ca_file=None, tls_cert=None,
+                     tls_key=None) -> dict:
+    """The keyword options of :func:`make_executor` for the ``phrt sweep`` flags, checked
+    (ExecutorError): --workers and --scheduler not both, a well-formed address, --dashboard only
+    with --workers, the TLS files only (and all three) with a tls:// scheduler."""
+    make_executor(workers, scheduler)
+    check_tls_options(scheduler, tls_ca_file, tls_cert, tls_key)
+    if dashboard is not None and workers is None:
+        raise ExecutorError("--dashboard is for the LocalCluster of --workers: an existing cluster's dashboard is "
+                            "its scheduler's")
+    options = {}
+    if dashboard is not None:
+        options["dashboard_address"] = dashboard
+    if tls_ca_file is not None:
+        options["security"] = tls_security(tls_ca_file, tls_cert, tls_key)
+    return options
+
+
+def check_tls_options(scheduler, ca_file, cert, key):
+    """ExecutorError unless the TLS files go with a tls:// scheduler: all three or none, each a
+    readable file, and a tls:// scheduler is given them (Dask's own configuration
+    ``distributed.comm.tls.*`` counts too)."""
+    given = [value for value in (ca_file, cert, key) if value is not None]
+    tls = bool(scheduler) and str(scheduler).startswith("tls://")
+    if given and not tls:
+        raise ExecutorError("--tls-ca-file/--tls-cert/--tls-key are for a tls:// --scheduler")
+    if given and len(given) != 3:
+        raise ExecutorError("give all of --tls-ca-file, --tls-cert and --tls-key for a tls:// scheduler")
+    for value in given:
+        if not os.path.isfile(value):
+            raise ExecutorError(f"no TLS file '{value}'")
+    if tls and not given and not _tls_configured():
+        raise ExecutorError(f"the scheduler {scheduler} speaks TLS: give --tls-ca-file, --tls-cert and --tls-key "
+                            f"(or Dask's distributed.comm.tls configuration; docs/cluster.md)")
+
+
+def _tls_configured() -> bool:
+    try:
+        import dask.config
+    except ImportError:
+        return False
+    return bool(dask.config.get("distributed.comm.tls.ca-file", None))
+
+
+def tls_security(ca_file, cert, key):
+    """A ``distributed.security.Security`` for a client of a TLS cluster (encryption required)."""
+    import_distributed()
+    from distributed.security import Security
+    return Security(tls_ca_file=str(ca_file), tls_client_cert=str(cert), tls_client_key=str(key),
+                    require_encryption=True)
 
 
 def _probe(address: str, timeout_s: float):
@@ -179,7 +231,8 @@ class DaskExecutor:
     connects and checks the workers; ``close()`` stops what it started."""
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None, *, plugins=(),
-                 dashboard_address: str = DEFAULT_DASHBOARD, connect_timeout_s: float = CONNECT_TIMEOUT_S):
+                 dashboard_address: str = DEFAULT_DASHBOARD, connect_timeout_s: float = CONNECT_TIMEOUT_S,
+                 security=None):
         if (workers is None) == (scheduler is None):
             raise ExecutorError("give the Dask executor either a number of workers or a scheduler address")
         if workers is not None and workers < 1:
@@ -188,6 +241,7 @@ class DaskExecutor:
         self.scheduler = check_scheduler_address(scheduler) if scheduler is not None else None
         self.plugins = tuple(plugins)  # distributed.WorkerPlugin instances, set up on every worker
         self.dashboard_address = dashboard_address
+        self.security = security  # distributed.security.Security of a TLS cluster, or None
         self.connect_timeout_s = connect_timeout_s
         self.cluster = None
         self.client = None
@@ -204,12 +258,14 @@ class DaskExecutor:
                     warnings.simplefilter("ignore")
                     self.cluster = distributed.LocalCluster(
                         n_workers=self.workers, threads_per_worker=1, processes=True,
-                        resources={RESOURCE: 1}, memory_limit=0, dashboard_address=self.dashboard_address)
+                        resources={RESOURCE: 1}, memory_limit=0, dashboard_address=self.dashboard_address,
+                        host=LOCAL_HOST)
                 self.client = distributed.Client(self.cluster)
             else:
                 try:
                     _probe(self.scheduler, self.connect_timeout_s)
-                    self.client = distributed.Client(self.scheduler, timeout=self.connect_timeout_s)
+                    options = {} if self.security is None else {"security": self.security}
+                    self.client = distributed.Client(self.scheduler, timeout=self.connect_timeout_s, **options)
                 except (OSError, TimeoutError) as error:
                     raise ExecutorError(f"cannot reach the Dask scheduler at {self.scheduler} ({_one_line(error)}): "
                                         f"start one with 'dask scheduler' (docs/cluster.md)") from None
@@ -338,47 +394,3 @@ def make_executor(workers: int | None = None, scheduler: str | None = None, **op
         raise ExecutorError("--workers and --scheduler both given: start a LocalCluster of N workers or use an "
                             "existing cluster, not both")
     return DaskExecutor(workers=workers, scheduler=scheduler, **options)
-
-
-class Progress:
-    """The line ``jobs 3/10 done (1 skipped, 0 failed), ETA 40 s`` on ``stream`` when it is a terminal
-    (nothing otherwise).  The ETA is the time per job that ran so far (skipped jobs left out,
-    several workers counted in: wall time over jobs done) times the jobs left."""
-
-    def __init__(self, total: int, stream, clock=time.perf_counter):
-        self.total = total
-        self.stream = stream
-        self.active = bool(getattr(stream, "isatty", lambda: False)())
-        self.clock = clock
-        self.started = clock()
-        self.finished = self.skipped = self.failed = 0
-
-    def eta_s(self) -> float | None:
-        ran = self.finished - self.skipped
-        if ran <= 0:
-            return None
-        return (self.clock() - self.started) / ran * (self.total - self.finished)
-
-    def line(self) -> str:
-        eta = self.eta_s()
-        text = f"jobs {self.finished}/{self.total} done ({self.skipped} skipped, {self.failed} failed)"
-        if self.finished < self.total:
-            text += f", ETA {eta:.0f} s" if eta is not None else ", ETA --"
-        return text
-
-    def update(self, outcome: JobOutcome):
-        self.finished += 1
-        self.skipped += outcome.status == "skipped"
-        self.failed += outcome.status == "failed"
-        self.show()
-
-    def show(self):
-        if self.active:
-            self.stream.write("\r\033[K  " + self.line() + ("\n" if self.finished >= self.total else ""))
-            self.stream.flush()
-
-    def clear(self):
-        """Wipe the line (before printing something else on the terminal)."""
-        if self.active and self.finished < self.total:
-            self.stream.write("\r\033[K")
-            self.stream.flush()

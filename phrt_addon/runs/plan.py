@@ -9,12 +9,21 @@ the paper's relevance and the error-aware one), then the oracle on sampled
 frames of all hybrid runs, then a report.
 
 Each job writes exactly one directory under the sweep folder, first under a
-temporary name (``.<id>.partial-<pid>``) that is renamed when the job is
-complete, so an interrupted job never looks complete.  A job is *complete*
-when its directory holds a complete ``summary.json`` (runs) or an
-``oracle.json`` computed from the current runs (the oracle); complete jobs are
-skipped when the plan is run again, and a run whose summary is missing is
-redone.
+temporary name (``.<id>.partial-<host>-<pid>``) that is renamed when the job is
+complete, so an interrupted job never looks complete; a later attempt removes
+only the temporary folders of attempts whose process is gone (same host, no
+such process: ``runs/lock.tag_is_dead``), never a live one's.  A run is
+*complete* when its directory holds a final ``summary.json`` whose recorded
+work (``runs/work.py``: scene file and its content hash, frames, resolution,
+settings, PHRT's version) is the plan's; the oracle when its ``oracle.json``
+was computed from the current runs.  Complete jobs are skipped when the plan
+is run again; any other is redone, its outcome saying why in one line.
+
+Job ids are folder names under the sweep folder: :func:`check_job_id` admits
+only a plain name (no separator, not ``.`` or ``..``, no leading dot), when a
+plan is built and when it is read back, so no job ever writes or removes
+anything outside the sweep folder; two jobs of one id (budgets closer than the
+id's two decimals) are refused before ``plan.json`` is written.
 
 Executors (:class:`Executor`) take the plan and a job function
 ``execute(plan_path, job_id) -> JobOutcome`` (``cli/sweep.py:execute_job``:
@@ -45,6 +54,7 @@ from typing import Callable, Protocol, Sequence
 from .. import defaults
 from ..report import oracle
 from .. import schema
+from . import atomic, lock, work
 
 PLAN_JSON = "plan.json"
 PLAN_VERSION = 1
@@ -63,6 +73,21 @@ VARIANTS = {
     "rperms": {"selection_order": "RELEVANCE_PER_MS"},
     "error": {"relevance": "ERROR"},
 }
+
+
+class PlanError(ValueError):
+    """A plan that cannot be run (duplicate or unsafe job ids...): the message is one line."""
+
+
+def check_job_id(job_id) -> str:
+    """``job_id`` when it is a plain folder name, else PlanError."""
+    text = job_id if isinstance(job_id, str) else None
+    if (not text or text in (".", "..") or text.startswith(".") or len(text.encode("utf-8")) > 255
+            or any(separator in text for separator in ("/", "\\", "\0", os.sep, os.altsep or "/"))
+            or any(ord(character) < 32 for character in text)):
+        raise PlanError(f"job id {job_id!r} is not a plain folder name (no separators, not '.' or '..', "
+                        f"no leading dot)")
+    return text
 
 
 def budget_fractions(count: int) -> list[float]:
@@ -151,6 +176,10 @@ class Plan:
         if data.get("version") != PLAN_VERSION:
             raise ValueError(f"plan version {data.get('version')!r} is not {PLAN_VERSION}")
         jobs = [Job(**job) for job in data["jobs"]]
+        for job in jobs:
+            check_job_id(job.id)
+            for dependency in job.depends_on:
+                check_job_id(dependency)
         return cls(scene=data["scene"], scene_label=data["scene_label"], path=data["path"],
                    frames=list(data["frames"]), resolution=list(data["resolution"]),
                    budgets=list(data["budgets"]), oracle_every=int(data["oracle_every"]), jobs=jobs)
@@ -182,6 +211,13 @@ def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budg
                             depends_on=[raster.id, raytrace.id]))
     hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
     jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raytrace.id, *hybrids]))
+    seen = {}
+    for job in jobs:
+        check_job_id(job.id)
+        if job.id in seen:
+            raise PlanError(f"budgets {seen[job.id]:g} and {job.budget_at:g} give the same run id '{job.id}': give "
+                            f"budgets at least 0.01 apart (--budget-at), or fewer --budgets (at most 98)")
+        seen[job.id] = job.budget_at
     return Plan(scene=scene, scene_label=scene_label, path=path, frames=[int(frames[0]), int(frames[1])],
                 resolution=[int(resolution[0]), int(resolution[1])], budgets=[float(b) for b in budgets],
                 oracle_every=int(oracle_every), jobs=jobs)
@@ -191,42 +227,53 @@ def write_plan(plan: Plan, folder) -> Path:
     """Write ``folder/plan.json`` (through a temporary file); returns its path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / PLAN_JSON
-    temporary = folder / (PLAN_JSON + ".tmp")
-    temporary.write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
-    os.replace(temporary, path)
-    return path
+    return atomic.write_text(folder / PLAN_JSON, json.dumps(plan.to_json(), indent=2) + "\n")
 
 
 def read_plan(plan_path) -> Plan:
     return Plan.from_json(json.loads(Path(plan_path).read_text(encoding="utf-8")))
 
 
-def same_work(old: Plan, new: Plan) -> bool:
-    """Whether runs of ``old`` can be reused for ``new`` (same scene, path, frames and resolution)."""
-    return (old.scene_label, old.path, list(old.frames), list(old.resolution)) == \
-        (new.scene_label, new.path, list(new.frames), list(new.resolution))
+def wanted_work(plan: Plan, job: Job, scene_file) -> dict:
+    """The work a run of ``job`` records when done from ``scene_file`` (the .blend it opens)."""
+    return work.work_record(scene_file, plan.frames, plan.resolution, mode=job.mode, images="exr",
+                            budget_ms=job.budget_ms, budget_at=job.budget_at, overrides=job.overrides)
 
 
-def run_is_complete(run_dir, plan: Plan) -> bool:
-    """A finished run of the plan's whole frame range (not partial, not cancelled)."""
+def run_redo_reason(run_dir, plan: Plan, wanted: dict | None = None) -> str | None:
+    """Why the run in ``run_dir`` must be (re)done for ``plan``, None when it is complete: a final
+    summary of the plan's whole frame range and resolution, and (given ``wanted``) the same work."""
     path = Path(run_dir) / schema.SUMMARY_JSON
     if not path.is_file():
-        return False
+        return "no run yet" if not Path(run_dir).exists() else "the run did not finish"
     try:
         summary = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return False
+        return "its summary.json cannot be read"
+    if summary.get("partial") or summary.get("cancelled"):
+        return "the run did not finish"
+    if wanted is not None:
+        difference = work.work_difference(summary.get("work"), wanted)
+        if difference is not None:
+            return difference
     expected = plan.frames[1] - plan.frames[0] + 1
-    return (not summary.get("partial") and not summary.get("cancelled")
-            and summary.get("frame_count") == expected and list(summary.get("resolution") or []) == plan.resolution)
+    if summary.get("frame_count") != expected:
+        return f"{summary.get('frame_count')} frames, not {expected}"
+    if list(summary.get("resolution") or []) != plan.resolution:
+        return f"resolution {summary.get('resolution')}, not {plan.resolution}"
+    return None
 
 
-def job_is_complete(plan: Plan, folder, job: Job) -> bool:
+def run_is_complete(run_dir, plan: Plan, wanted: dict | None = None) -> bool:
+    """A finished run of the plan's whole frame range (not partial, not cancelled; the same work)."""
+    return run_redo_reason(run_dir, plan, wanted) is None
+
+
+def job_is_complete(plan: Plan, folder, job: Job, wanted: dict | None = None) -> bool:
     folder = Path(folder)
     if job.kind == "run":
-        return run_is_complete(folder / job.id, plan)
-    results = oracle.read_results(folder / job.id)
+        return run_is_complete(folder / check_job_id(job.id), plan, wanted)
+    results = oracle.read_results(folder / check_job_id(job.id))
     if results is None:
         return False
     runs = [dependency for dependency in job.depends_on if plan.job(dependency).mode == "HYBRID"]
@@ -234,14 +281,34 @@ def job_is_complete(plan: Plan, folder, job: Job) -> bool:
 
 
 def partial_dir(folder, job: Job) -> Path:
-    """Where a job writes before it is complete."""
-    return Path(folder) / f".{job.id}.partial-{os.getpid()}"
+    """Where a job writes before it is complete (this host and process in the name)."""
+    return Path(folder) / f".{check_job_id(job.id)}.partial-{lock.owner_tag()}"
+
+
+def dead_attempts(folder, job: Job) -> list:
+    """Temporary folders of earlier attempts at ``job`` whose process is gone (this host, no such
+    process) or is this one: the ones a new attempt may remove."""
+    found = []
+    prefix = f".{check_job_id(job.id)}.partial-"
+    for path in Path(folder).glob(f"{prefix}*"):
+        tag = path.name[len(prefix):]
+        if tag == lock.owner_tag() or lock.tag_is_dead(tag):
+            found.append(path)
+    return found
+
+
+def inside(folder, path) -> Path:
+    """``path`` when it lies strictly inside ``folder`` (after resolving links), else PlanError."""
+    folder, resolved = Path(folder).resolve(), Path(path).resolve()
+    if resolved == folder or folder not in resolved.parents:
+        raise PlanError(f"'{path}' is not inside the sweep folder '{folder}': not removed")
+    return Path(path)
 
 
 def publish(partial: Path, final: Path) -> None:
     """Rename a finished job's directory to its final name (replacing an incomplete one)."""
     if final.exists():
-        shutil.rmtree(final)
+        shutil.rmtree(inside(final.parent, final))
     os.replace(partial, final)
 
 

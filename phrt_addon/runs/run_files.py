@@ -1,18 +1,29 @@
 """The files of a RUN_DIR (docs/formats.md), read back: the logs as typed rows, the summary, the
 images, whether an image file was written to its end; and whether a folder can hold a run.
 
-The writer is ``runlog.RunLog``; ``frames.csv`` is its commit record, so
-:func:`read_selection` ignores selection rows of frames absent from ``frames.csv``
-(a replay killed half way through writing a frame), and an unfinished last CSV line
-is ignored.  Plain Python, no ``bpy``.
+The writer is ``run_log.RunLog``; ``summary.json`` is its commit record (it exists from the run's
+start and is rewritten as frames complete): :func:`read_frames` reads the first
+``frame_count`` rows of ``frames.csv``, :func:`read_selection` / :func:`iter_selection` the
+selection rows of those frames, and :func:`run_images` the images of those frames in the format
+the summary names (``"images"``: none, exr or png), nothing else.  So a run killed at any moment
+reads back consistently, and images an earlier run left in the folder are never taken for this
+run's.  A folder without ``summary.json`` (an older PHRT) reads ``frames.csv`` whole.  The CSVs
+are parsed by the ``csv`` module over the whole file: a quoted cell may hold newlines or any
+Unicode (U+2028, ``\\x85``, ``\\f``); an unfinished last record is ignored.  Plain Python, no ``bpy``.
 """
+import array
 import csv
+import io
 import json
 import struct
 import os
 from pathlib import Path
 
+import numpy as np
+
 from ..schema import BOOL_COLUMNS, FRAMES_CSV, FRAMES_DIR, SELECTION_CSV, STRING_COLUMNS, SUMMARY_JSON
+
+IMAGE_SUFFIXES = {"exr": ".exr", "png": ".png"}
 
 
 def _parse_cell(column, text):
@@ -32,48 +43,163 @@ def _parse_cell(column, text):
         return text
 
 
-def _read_csv(path):
-    """Rows of a CSV log as dicts; an unfinished last line is ignored."""
-    text = Path(path).read_text(encoding="utf-8")
-    if text and not text.endswith("\n"):
-        text = text[: text.rfind("\n") + 1]
-    reader = csv.reader(text.splitlines())
-    header = next(reader, None)
-    if header is None:
-        return []
-    return [{column: _parse_cell(column, cell) for column, cell in zip(header, cells)}
-            for cells in reader if len(cells) == len(header)]
+def _records(handle):
+    """CSV records of an open file (newline=""): the header, then each complete record.  A last
+    record a writer stopped in the middle of (no line end, or inside a quoted cell) is left out;
+    strict parsing also stops at a damaged record."""
+    reader = csv.reader(handle, strict=True)
+    previous = None
+    try:
+        for record in reader:
+            if previous is not None:
+                yield previous
+            previous = record
+    except csv.Error:  # the record being parsed is unfinished or damaged: the one before it is whole
+        if previous is not None:
+            yield previous
+        return
+    if previous is not None and _ends_with_newline(handle):
+        yield previous
 
 
-def read_frames(run_dir):
-    """Rows of ``frames.csv`` as dicts of typed values (``None`` for empty cells)."""
-    return _read_csv(Path(run_dir) / FRAMES_CSV)
+def _ends_with_newline(handle) -> bool:
+    raw = handle.buffer
+    raw.seek(0, io.SEEK_END)
+    if raw.tell() == 0:
+        return False
+    raw.seek(-1, io.SEEK_END)
+    return raw.read(1) == b"\n"
 
 
-def read_selection(run_dir):
-    """Rows of ``selection.csv`` of the frames that ``frames.csv`` records.
+def _iter_csv(path, limit_frames=None):
+    """Typed rows (dicts) of a CSV log, streamed; only rows whose frame is in ``limit_frames``."""
+    try:
+        handle = open(path, newline="", encoding="utf-8")
+    except FileNotFoundError:
+        return
+    with handle:
+        records = _records(handle)
+        header = next(records, None)
+        if header is None:
+            return
+        frame_at = header.index("frame") if "frame" in header else None
+        for cells in records:
+            if len(cells) != len(header):
+                continue
+            if limit_frames is not None and (frame_at is None or _parse_cell("frame", cells[frame_at])
+                                             not in limit_frames):
+                continue
+            yield {column: _parse_cell(column, cell) for column, cell in zip(header, cells)}
 
-    ``visible`` and ``selected`` are bools, ``element`` and ``reason`` strings.
-    """
-    frames = {row["frame"] for row in read_frames(run_dir)}
-    return [row for row in _read_csv(Path(run_dir) / SELECTION_CSV) if row["frame"] in frames]
+
+def _summary_or_none(run_dir):
+    try:
+        return read_summary(run_dir)
+    except (FileNotFoundError, ValueError):
+        return None
+
+
+def read_frames(run_dir, summary=None):
+    """Rows of ``frames.csv`` as dicts of typed values (``None`` for empty cells): the first
+    ``frame_count`` of them when the folder has a ``summary.json`` (the frames it commits)."""
+    summary = _summary_or_none(run_dir) if summary is None else summary
+    rows = list(_iter_csv(Path(run_dir) / FRAMES_CSV))
+    if summary is not None and isinstance(summary.get("frame_count"), int):
+        rows = rows[: summary["frame_count"]]
+    return rows
+
+
+def iter_selection(run_dir, summary=None):
+    """Rows of ``selection.csv`` of the frames :func:`read_frames` reads, streamed (one dict at a
+    time: a report never holds a whole selection log).  ``visible`` and ``selected`` are bools,
+    ``element`` and ``reason`` strings."""
+    frames = {row["frame"] for row in read_frames(run_dir, summary)}
+    yield from _iter_csv(Path(run_dir) / SELECTION_CSV, limit_frames=frames)
+
+
+def read_selection(run_dir, summary=None):
+    """:func:`iter_selection` as a list."""
+    return list(iter_selection(run_dir, summary))
+
+
+class SelectionStates:
+    """Each frame's (element, selected) pairs of a run in the order of ``selection.csv``, read in one
+    streaming pass and kept compact (an index and a byte per row, not a dict): what the report's
+    flips and popping need.  Iterating yields ``{"frame", "element", "selected"}`` dicts."""
+
+    def __init__(self, run_dir, summary=None):
+        self.names, index = [], {}
+        self.by_frame = {}  # frame -> (array of element indices, bytearray of selected flags)
+        for row in iter_selection(run_dir, summary):
+            name = str(row["element"])
+            position = index.get(name)
+            if position is None:
+                position = index[name] = len(self.names)
+                self.names.append(name)
+            entry = self.by_frame.get(row["frame"])
+            if entry is None:
+                entry = self.by_frame[row["frame"]] = (array.array("i"), bytearray())
+            entry[0].append(position)
+            entry[1].append(1 if row["selected"] else 0)
+        self._flips = None
+
+    def __iter__(self):
+        for frame, (elements, flags) in self.by_frame.items():
+            for position, selected in zip(elements, flags):
+                yield {"frame": frame, "element": self.names[position], "selected": bool(selected)}
+
+    def __len__(self):
+        return sum(len(flags) for _, flags in self.by_frame.values())
+
+    def flips_per_element_per_100(self) -> dict:
+        """``runs.summary.flips_per_element_per_100`` of these rows, computed once."""
+        if self._flips is None:
+            frames = sorted(self.by_frame)
+            states = {}
+            for frame in frames:
+                elements, flags = self.by_frame[frame]
+                for position, selected in zip(elements, flags):
+                    states.setdefault(position, bytearray()).append(selected)
+            count = len(frames)
+            self._flips = {} if count == 0 else {
+                self.names[position]: 100.0 * int(np.count_nonzero(np.diff(np.frombuffer(bytes(flags), np.uint8))))
+                / count for position, flags in states.items()}
+        return self._flips
 
 
 def read_summary(run_dir):
-    """``summary.json`` as a dict; ``FileNotFoundError`` if the run never closed."""
+    """``summary.json`` as a dict; ``FileNotFoundError`` if the folder holds no run."""
     path = Path(run_dir) / SUMMARY_JSON
     if not path.exists():
-        raise FileNotFoundError(f"{path} is missing: the run did not finish (RunLog.close)")
+        raise FileNotFoundError(f"{path} is missing: the folder holds no run")
     return json.loads(path.read_text(encoding="utf-8"))
 
 
-def frame_image_path(run_dir, frame):
-    """The image of ``frame`` in ``RUN_DIR/frames`` (.exr preferred over .png), or None."""
-    for suffix in (".exr", ".png"):
+def frame_image_path(run_dir, frame, images=None):
+    """The image of ``frame`` in ``RUN_DIR/frames`` in the run's format (``images``: 'exr', 'png'
+    or 'none'; by default the summary's), or None (no image, or the run writes none)."""
+    if images is None:
+        summary = _summary_or_none(run_dir)
+        images = summary.get("images") if summary is not None else None
+    suffixes = (IMAGE_SUFFIXES[images],) if images in IMAGE_SUFFIXES else () if images == "none" \
+        else (".exr", ".png")
+    for suffix in suffixes:
         path = Path(run_dir) / FRAMES_DIR / f"{int(frame):04d}{suffix}"
         if path.exists():
             return path
     return None
+
+
+def run_images(run_dir, summary=None) -> dict:
+    """{frame: image path} of the frames the run commits, in the format its summary names."""
+    summary = _summary_or_none(run_dir) if summary is None else summary
+    images = summary.get("images") if summary is not None else None
+    found = {}
+    for row in read_frames(run_dir, summary):
+        path = frame_image_path(run_dir, row["frame"], images)
+        if path is not None:
+            found[row["frame"]] = path
+    return found
 
 
 EXR_MAGIC = b"\x76\x2f\x31\x01"

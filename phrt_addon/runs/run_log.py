@@ -8,11 +8,17 @@ A RUN_DIR (docs/formats.md) holds
 - ``summary.json``: statistics of the run, the versions and the machine.
 
 :class:`RunLog` writes them one frame at a time and flushes both CSVs after
-every frame, so a cancelled or crashed replay still leaves complete rows for
-the frames it finished.  ``frames.csv`` is the commit record: a frame's
-selection rows are written and flushed before its frame row, and
-:func:`read_selection` ignores selection rows of frames absent from
-``frames.csv`` (a replay killed half way through writing a frame).
+every frame.  Given the run's facts when it opens (``facts``), it writes
+``summary.json`` at once with ``"partial": true`` and ``frame_count`` 0, and
+rewrites it as frames complete (at most once a second, and once a frame when
+frames take longer: whichever is rarer), then a last time at :meth:`close`.
+``summary.json`` is the commit record: the readers (``run_files.py``) read the
+first ``frame_count`` rows of ``frames.csv``, the selection rows of those frames
+and their images only, so a run killed at any moment (SIGKILL, a power cut)
+reads back consistently: the frames done when the summary was last written.
+A frame's image is renamed into place before its rows are written, and its
+selection rows before its frame row.  Every ``summary.json`` is written under a
+temporary name with this host and pid (``runs/atomic.py``) and renamed.
 
 No NaN or Inf reaches a log: a non-finite number is written as an empty cell
 (read back as ``None``) and counted in ``summary.json`` under
@@ -26,12 +32,14 @@ from array import array
 import logging
 import math
 import os
-import platform
+import time
 from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
 
+from . import atomic
+from .summary import machine_info, summarize
 from ..schema import FRAME_COLUMNS, FRAMES_CSV, REASONS, SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, SUMMARY_JSON
 
 
@@ -40,6 +48,7 @@ log = logging.getLogger(__name__)
 # Keys of summary.json the caller must pass to close() (the rest is computed).
 SUMMARY_REQUIRED_KEYS = ("scene", "path", "resolution", "blender_version", "embreex_version")
 SIGNIFICANT_DIGITS = 6
+SUMMARY_EVERY_S = 1.0  # the partial summary is rewritten at most this often
 
 
 def format_value(value):
@@ -187,20 +196,32 @@ class RunLog:
     from the keys of the first row.  Existing logs in ``run_dir`` are replaced.
     """
 
-    def __init__(self, run_dir, extra_frame_columns=None, extra_selection_columns=None):
+    def __init__(self, run_dir, extra_frame_columns=None, extra_selection_columns=None, facts=None,
+                 summary_every_s=SUMMARY_EVERY_S, clock=time.monotonic):
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        summary = self.run_dir / SUMMARY_JSON
-        if summary.exists():
-            summary.unlink()
-        self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
-                                    extra_selection_columns)
-        self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
+        if facts is None:
+            (self.run_dir / SUMMARY_JSON).unlink(missing_ok=True)  # first: the folder stops being a run
         # What summary.json needs, kept compact (a 1000-frame replay must not grow with its length
         # more than it must): one tuple per frame, per element its frames and selected flags.
         self._frame_values = []
         self._selection_states = {}  # element -> (array of frames, bytearray of selected flags)
         self._closed = False
+        self._facts = None if facts is None else dict(facts)
+        self._summary_every_s = float(summary_every_s)
+        self._clock = clock
+        self._summary_written_at = None
+        self._selection = self._frames = None
+        self.summaries_written = 0
+        if self._facts is not None:  # the run exists (0 frames) before its logs do
+            self._check_facts(self._facts)
+            self.write_partial_summary()
+        self._selection = _CsvTable(self.run_dir / SELECTION_CSV, SELECTION_COLUMNS,
+                                    extra_selection_columns)
+        self._frames = _CsvTable(self.run_dir / FRAMES_CSV, FRAME_COLUMNS, extra_frame_columns)
+        for table in (self._selection, self._frames):
+            if table.extra is not None:
+                table.flush()  # the header now: its columns are known
 
     @property
     def frame_count(self):
@@ -237,6 +258,22 @@ class RunLog:
                 states = self._selection_states[element] = (array("q"), bytearray())
             states[0].append(int(frame))
             states[1].append(1 if row["selected"] else 0)
+        if self._facts is not None and (self._summary_written_at is None
+                                        or self._clock() - self._summary_written_at >= self._summary_every_s):
+            self.write_partial_summary()
+
+    def write_partial_summary(self, extra=None):
+        """Rewrite ``summary.json`` with ``"partial": true`` and the frames logged so far (an
+        ``OSError`` of a full disk is raised; the previous summary then stays)."""
+        if self._facts is None:
+            raise ValueError("RunLog was opened without facts: it has no partial summary to write")
+        self._write_summary({**self._facts, **(extra or {}), "partial": True})
+
+    @staticmethod
+    def _check_facts(facts):
+        missing = [key for key in SUMMARY_REQUIRED_KEYS if key not in facts]
+        if missing:
+            raise ValueError(f"summary.json needs {missing} from the caller")
 
     def close(self, summary_extra):
         """Close both CSVs and write ``summary.json``; returns the summary dict.
@@ -247,34 +284,32 @@ class RunLog:
         """
         if self._closed:
             raise ValueError("RunLog is already closed")
-        missing = [key for key in SUMMARY_REQUIRED_KEYS if key not in summary_extra]
-        if missing:
-            raise ValueError(f"summary.json needs {missing} from the caller")
+        summary_extra = {"partial": False, **(self._facts or {}), **summary_extra}
+        self._check_facts(summary_extra)
         try:
             self._close_files()
         except OSError:
             pass  # a CSV could not take its last bytes (a full disk, reported by the writer): its complete rows stay
+        return self._write_summary(summary_extra)
+
+    def _write_summary(self, summary_extra):
         frame_rows = [dict(zip(FRAME_COLUMNS, values)) for values in self._frame_values]
         selection_states = [{"frame": frame, "element": element, "selected": bool(selected)}
                             for element, (frames, flags) in self._selection_states.items()
                             for frame, selected in zip(frames, flags)]
         first = frame_rows[0] if frame_rows else {}
         summary = {"scene": summary_extra["scene"], "path": summary_extra["path"],
-                   "mode": first.get("mode"), "resolution": summary_extra["resolution"],
-                   "budget_ms": first.get("budget_ms")}
+                   "mode": first.get("mode", summary_extra.get("mode")), "resolution": summary_extra["resolution"],
+                   "budget_ms": first.get("budget_ms", summary_extra.get("budget_ms"))}
         summary.update(summarize(frame_rows, selection_states))
-        summary["non_finite_values_dropped"] = self._frames.non_finite + self._selection.non_finite
+        summary["non_finite_values_dropped"] = sum(table.non_finite for table in (self._frames, self._selection)
+                                                   if table is not None)
         summary["machine"] = machine_info()
         summary.update(summary_extra)
         summary = _round_json(_json_safe(summary))
-        path = self.run_dir / SUMMARY_JSON
-        temporary = path.with_suffix(".json.tmp")
-        try:
-            temporary.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-            os.replace(temporary, path)
-        except OSError:
-            temporary.unlink(missing_ok=True)  # no half-written file is left behind
-            raise
+        atomic.write_text(self.run_dir / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        self._summary_written_at = self._clock()
+        self.summaries_written += 1
         return summary
 
     def _close_files(self):
@@ -298,86 +333,3 @@ class RunLog:
         if not self._closed:
             self._close_files()
         return False
-
-
-def summarize(frame_rows, selection_rows):
-    """The computed part of ``summary.json`` from frame rows and selection rows."""
-    def column(name):
-        values = [row.get(name) for row in frame_rows]
-        return np.array([float(v) for v in values if v is not None and math.isfinite(float(v))])
-
-    def mean(values):
-        return float(values.mean()) if values.size else None
-
-    total = column("total_ms")
-    frames = [int(row["frame"]) for row in frame_rows]
-    flips = flips_per_element_per_100(selection_rows)
-    rates = np.array(list(flips.values()), dtype=float)
-    return {
-        "frame_count": len(frame_rows),
-        "frame_start": min(frames) if frames else None,
-        "frame_end": max(frames) if frames else None,
-        "total_ms": {
-            "mean": mean(total),
-            "p50": float(np.percentile(total, 50)) if total.size else None,
-            "p95": float(np.percentile(total, 95)) if total.size else None,
-            "max": float(total.max()) if total.size else None,
-        },
-        "stage_mean_ms": {name: mean(column(name)) for name in STAGE_COLUMNS},
-        "predicted_trace_mean_ms": mean(column("predicted_trace_ms")),
-        "mean_n_visible": mean(column("n_visible")),
-        "mean_n_selected": mean(column("n_selected")),
-        "mean_rays": mean(column("rays")),
-        "selection_flips_per_element_per_100_frames": {
-            "mean": float(rates.mean()) if rates.size else 0.0,
-            "max": float(rates.max()) if rates.size else 0.0,
-            "per_element": flips,
-        },
-    }
-
-
-def flips_per_element_per_100(selection_rows):
-    """Selection flips of each element per 100 frames of the run.
-
-    A flip is a change of an element's ``selected`` state between two
-    consecutive frames (by frame number) in which the element has a row.  The
-    count is normalised by the run's length: the number of distinct frames in
-    ``selection_rows``.  Returns ``{element: flips * 100 / frames}``.
-    """
-    rows = [row for row in selection_rows if row.get("selected") is not None]
-    frame_count = len({int(row["frame"]) for row in rows})
-    if frame_count == 0:
-        return {}
-    by_element = {}
-    for row in rows:
-        by_element.setdefault(str(row["element"]), []).append(
-            (int(row["frame"]), bool(row["selected"])))
-    rates = {}
-    for element, states in by_element.items():
-        states.sort()
-        selected = np.array([state for _, state in states], dtype=bool)
-        flips = int(np.count_nonzero(selected[1:] != selected[:-1]))
-        rates[element] = 100.0 * flips / frame_count
-    return rates
-
-
-def machine_info():
-    """CPU model and core counts of this machine."""
-    model = None
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
-            for line in cpuinfo:
-                if line.lower().startswith(("model name", "hardware")):
-                    model = line.split(":", 1)[1].strip() or None
-                    break
-    except OSError:
-        pass
-    info = {
-        "cpu_model": model or platform.processor() or platform.machine(),
-        "cores": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-    }
-    if hasattr(os, "sched_getaffinity"):
-        info["usable_cores"] = len(os.sched_getaffinity(0))
-    return info

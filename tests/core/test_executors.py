@@ -7,6 +7,7 @@ import json
 import pytest
 
 from phrt.phrt_addon.runs import executors, plan
+from phrt.phrt_addon.runs import progress as run_progress
 
 
 def test_a_task_whose_dependency_failed_does_not_run_its_job():
@@ -65,7 +66,7 @@ class Terminal(io.StringIO):
 def test_progress_shows_jobs_done_and_an_eta_from_the_jobs_that_ran():
     now = [100.0]
     stream = Terminal()
-    progress = executors.Progress(5, stream, clock=lambda: now[0])
+    progress = run_progress.Progress(5, stream, clock=lambda: now[0])
     assert progress.line() == "jobs 0/5 done (0 skipped, 0 failed), ETA --"
     progress.update(plan.JobOutcome("a", "skipped"))
     assert progress.eta_s() is None  # a skipped job says nothing about how long the others take
@@ -85,7 +86,7 @@ def test_progress_shows_jobs_done_and_an_eta_from_the_jobs_that_ran():
 
 def test_progress_is_silent_when_stderr_is_not_a_terminal():
     stream = io.StringIO()
-    progress = executors.Progress(2, stream)
+    progress = run_progress.Progress(2, stream)
     progress.update(plan.JobOutcome("a", "done"))
     progress.clear()
     assert stream.getvalue() == ""

@@ -205,7 +205,7 @@ def test_unfinished_run_dir_is_refused(tmp_path):
                        "select_ms": 0.0, "trace_ms": 0.0, "composite_ms": 0.0,
                        "budget_ms": 1.0, "predicted_trace_ms": 0.0, "n_candidates": 0,
                        "n_visible": 0, "n_selected": 0, "rays": 0}, [])
-    with pytest.raises(ValueError, match="did not finish"):
+    with pytest.raises(ValueError, match="holds no run"):
         report.build_report([tmp_path / "cancelled"], out_dir=tmp_path / "report")
     with pytest.raises(ValueError, match="not a directory"):
         report.build_report([tmp_path / "missing"], out_dir=tmp_path / "report")

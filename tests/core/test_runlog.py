@@ -11,6 +11,7 @@ from phrt.phrt_addon.runs import run_log
 from phrt.phrt_addon import schema
 from phrt.phrt_addon.runs import run_files
 from phrt.phrt_addon.runs.run_log import RunLog
+from phrt.phrt_addon.runs import summary as run_summary
 
 CALLER_SUMMARY = {"scene": "atrium", "path": "path1", "mode": "HYBRID",
                   "resolution": (64, 48), "budget_ms": 150.0,
@@ -156,8 +157,8 @@ def test_flips_count_state_changes_between_consecutive_appearances():
     rows += [{"frame": 1, "element": "c", "selected": True},
              {"frame": 3, "element": "c", "selected": False}]
     # a: 1 0 1 1 -> 2 flips in a 4-frame run; c: 1 . 0 . -> 1 flip.
-    assert run_log.flips_per_element_per_100(rows) == {"a": 50.0, "b": 0.0, "c": 25.0}
-    assert run_log.flips_per_element_per_100([]) == {}
+    assert run_summary.flips_per_element_per_100(rows) == {"a": 50.0, "b": 0.0, "c": 25.0}
+    assert run_summary.flips_per_element_per_100([]) == {}
 
 
 @pytest.mark.parametrize("selected, reason", [(False, ""), (True, "over_budget"),
