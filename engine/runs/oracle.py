@@ -1,0 +1,188 @@
+"""The oracle's renders: sampled frames re-rendered with chosen subsets traced.
+
+See ``phrt_addon/report/oracle.py`` for what is measured and decided.  Everything
+here runs after the runs it judges, outside their timed regions: a
+:class:`ForcedRenderer` renders a frame of the path through the real engine
+(``bpy.ops.render.render``) with ``FrameRenderer.forced_selection`` set, so the
+chosen elements are traced instead of the heuristic's.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ...phrt_addon import metrics, runlog
+from ...phrt_addon.report import oracle
+from .. import extract, final
+
+
+class ForcedRenderer:
+    """Renders frames of ``camera`` in HYBRID mode with a given set of elements traced.
+
+    ``with ForcedRenderer(scene, camera, resolution) as renderer:``
+    ``image, stats, selection = renderer.render(frame, names)``; ``image`` is linear
+    RGB, top row first (like :func:`metrics.read_image`)."""
+
+    def __init__(self, scene, camera, resolution=None):
+        self.scene, self.camera, self.resolution = scene, camera, resolution
+        self.session = None
+
+    def __enter__(self):
+        scene, render = self.scene, self.scene.render
+        self._saved = {"camera": scene.camera, "frame": scene.frame_current, "engine": render.engine,
+                       "res": (render.resolution_x, render.resolution_y, render.resolution_percentage)}
+        scene.camera = self.camera
+        render.engine = "PHRT"
+        if self.resolution is not None:
+            render.resolution_x, render.resolution_y = self.resolution
+            render.resolution_percentage = 100
+        settings = extract.read_settings(scene)
+        settings.mode = "HYBRID"
+        settings.budget_at = None
+        self.session = final.ReplaySession(settings_override=settings, camera=self.camera).__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self.session.__exit__(None, None, None)
+        scene, render, saved = self.scene, self.scene.render, self._saved
+        scene.camera = saved["camera"]
+        scene.frame_set(saved["frame"])
+        render.engine = saved["engine"]
+        render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
+        return False
+
+    def render(self, frame, names):
+        if self.scene.frame_current != frame:
+            self.scene.frame_set(frame)
+        self.session.renderer.forced_selection = frozenset(names)
+        bpy.ops.render.render(write_still=False)
+        result = self.session.last_result
+        self.session.last_result = None
+        if result is None:
+            raise RuntimeError(f"frame {frame} was stopped while rendering")
+        image = np.ascontiguousarray(result.passes.combined[::-1, :, :3], dtype=np.float32)
+        return image, result.stats, result.selection
+
+
+def _selection_by_frame(run_dir):
+    chosen = {}
+    for row in runlog.read_selection(run_dir):
+        if row["selected"]:
+            chosen.setdefault(row["frame"], set()).add(str(row["element"]))
+    return chosen
+
+
+def _trace_ms(stats) -> float:
+    """The trace stage's measured ms without one-time Embree uploads."""
+    return max(float(stats["trace_ms"]) - float(stats.get("upload_ms") or 0.0), 0.0)
+
+
+def _timed(renderer, frame, names):
+    """(image, median trace ms, spread ms, selection) of ``oracle.TIMINGS`` renders of one subset
+    (the images are the same: the first is kept)."""
+    image, stats, selection = renderer.render(frame, names)
+    timings = [_trace_ms(stats)]
+    for _ in range(oracle.TIMINGS - 1):
+        timings.append(_trace_ms(renderer.render(frame, names)[1]))
+    median, spread = oracle.median_ms(timings)
+    return image, median, spread, selection
+
+
+def _budget_groups(runs):
+    """{budget ms: [labels]}: the hybrid runs judged by one oracle (their budget, rounded to 0.1 ms)."""
+    groups = {}
+    for label, run in runs.items():
+        budget = run["budget_ms"]
+        if budget is not None:
+            groups.setdefault(round(float(budget), 1), []).append(label)
+    return groups
+
+
+def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir=None, every=oracle.DEFAULT_EVERY,
+               resolution=None, on_progress=None):
+    """Measure candidates on every ``every``-th frame of the reference run, choose one oracle subset
+    per budget of the hybrid runs (``{label: run dir}``) within that budget's nominal time for
+    tracing, render it, and write each run's regret to the oracle folder ``out_dir``.  The shared
+    part of a frame's time comes from the raster run ``raster_dir`` (else from the oracle's own
+    frame with nothing traced).  Returns the folder's info."""
+    reference_dir = Path(reference_dir)
+    reference_frames = [row["frame"] for row in runlog.read_frames(reference_dir)]
+    frames = oracle.sampled_frames(reference_frames, every)
+    shared_of = oracle.shared_ms(runlog.read_frames(raster_dir)) if raster_dir is not None else {}
+    runs = {}
+    for label, run_dir in hybrid_dirs.items():
+        summary = runlog.read_summary(run_dir)
+        runs[label] = {"dir": Path(run_dir), "frames": {row["frame"]: row for row in runlog.read_frames(run_dir)},
+                       "selected": _selection_by_frame(run_dir), "budget_ms": summary.get("budget_ms")}
+    budgets = _budget_groups(runs)
+    measured, regret_rows = [], []
+    with ForcedRenderer(scene, camera, resolution) as renderer:
+        for count, frame in enumerate(frames):
+            reference_path = runlog.frame_image_path(reference_dir, frame)
+            if reference_path is None:
+                continue
+            reference = metrics.read_image(reference_path)
+            if count == 0:  # warm-up: shaders, shadow maps and Embree scenes are built once, not timed here
+                renderer.render(frame, ())
+                _, _, warm = renderer.render(frame, ())
+                renderer.render(frame, _competing(warm))
+            raster, raster_stats, selection = renderer.render(frame, ())
+            flip_raster = metrics.flip(reference, raster)
+            shared = shared_of.get(frame)
+            if shared is None:
+                shared = float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)
+            names = _competing(selection)
+            cost, spread, alone, area = [], [], [], []
+            rendered = {frozenset(): (raster, 0.0)}  # subset -> (image, its measured trace ms)
+            for name in names:
+                image, median, timing_spread, _ = _timed(renderer, frame, (name,))
+                rendered[frozenset((name,))] = (image, median)
+                cost.append(median)
+                spread.append(timing_spread)
+                alone.append(metrics.flip(reference, image))
+                area.append(int(selection.elements.area_px[selection.names.index(name)]))
+            alone = np.array(alone, dtype=np.float64)
+            cost = np.array(cost, dtype=np.float64)
+            overhead = 0.0
+            if len(names) > 1:  # all together: the trace stage's fixed part, paid once per frame
+                image, together, _, _ = _timed(renderer, frame, names)
+                rendered[frozenset(names)] = (image, together)
+                overhead = oracle.trace_overhead_ms(cost, together)
+            candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=cost - overhead,
+                                                benefit=flip_raster - alone, flip_raster=flip_raster,
+                                                flip_alone=alone, area_px=np.array(area), overhead_ms=overhead,
+                                                cost_spread_ms=np.array(spread, dtype=np.float64))
+            measured.append(candidates)
+            flips = {}
+            for budget, labels in budgets.items():
+                oracle_set = candidates.choose(oracle.nominal_time_left(budget, shared))
+                if oracle_set not in rendered:  # rendered and measured even when a run chose the same
+                    image, stats, _ = renderer.render(frame, oracle_set)
+                    rendered[oracle_set] = (image, _trace_ms(stats))
+                if oracle_set not in flips:
+                    flips[oracle_set] = metrics.flip(reference, rendered[oracle_set][0])
+                for label in labels:
+                    run = runs[label]
+                    row = run["frames"].get(frame)
+                    run_image = runlog.frame_image_path(run["dir"], frame)
+                    if row is None or run_image is None:
+                        continue
+                    heuristic_set = frozenset(run["selected"].get(frame, set()))
+                    heuristic_flip = metrics.flip(reference, metrics.read_image(run_image))
+                    regret_rows.append(oracle.regret_row(
+                        label, frame, run["budget_ms"], shared, row.get("time_left_ms"), heuristic_set,
+                        heuristic_flip, oracle_set, flips[oracle_set], candidates,
+                        oracle_trace_ms=rendered[oracle_set][1]))
+            if on_progress is not None:
+                on_progress(count + 1, len(frames))
+    return oracle.write_results(out_dir, every, frames, measured, regret_rows,
+                                {label: run["dir"] for label, run in runs.items()})
+
+
+def _competing(selection) -> list:
+    """Names of the frame's competing candidates (visible, tagged, within the area limit)."""
+    terms = selection.terms
+    mask = terms.candidate & terms.visible & terms.within_area
+    return [name for name, keep in zip(selection.names, mask.tolist()) if keep]
