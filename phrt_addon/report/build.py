@@ -3,8 +3,8 @@
 from pathlib import Path
 
 from .. import oracle
-from .document import _Table, _sections
-from .markup import _html, _markdown
+from .document import _sections
+from .markup import Table, _html, _markdown
 from .plots import _plot_error_vs_time, _plot_selection_quality, _plot_timeline
 from .runs import ReportFiles, _measure_group, _references, _unique_labels, _write_errors_csv, load_run
 from .selection import _measure_popping, _oracle_results, _regrets, _write_sweep, sweep_rows
@@ -70,7 +70,7 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
     sections = _sections(runs, groups, references, errors, files, rows=rows, regrets=regrets, pops=pops,
                          oracle_results=oracle_results)
     if failures:
-        sections[2:2] = [("table", _Table(
+        sections[2:2] = [("table", Table(
             "Failed jobs", ["Job", "Why"], [[job, message] for job, message in failures],
             "Jobs of the plan that ended without a result (after their retries); the report covers the "
             "others. Running the plan again retries them."))]

@@ -1,11 +1,12 @@
 """The report document's sections (items for ``markup``): Table II beside the paper's, runs, errors,
 stability, and with a sweep the runs on the error-time curve, regret, popping and the relevance verdict.
 """
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import defaults, metrics, oracle, runlog
+from . import captured
+from .markup import Table
+from .results import results_sections
 from .runs import BASELINE_VARIANT, PAPER_SCENES, PAPER_TABLE_II, WORST_ELEMENTS
 from .selection import RunRegret, variant_label
 
@@ -16,14 +17,6 @@ def _ms(value):
 
 def _number(value, spec):
     return "–" if value is None else format(value, spec)
-
-
-@dataclass
-class _Table:
-    title: str
-    header: list
-    rows: list
-    intro: str = ""
 
 
 def table_ii_hybrid(members):
@@ -49,9 +42,9 @@ def table_ii_rows(groups):
         means = {}
         for mode in ("RASTER", "RAYTRACE"):
             runs = [run for run in members if run.mode == mode]
-            means[mode] = runs[0].mean("total_ms") if runs else None
+            means[mode] = runs[0].steady("mean") if runs else None
         hybrid = table_ii_hybrid(members)
-        means["HYBRID"] = hybrid.mean("total_ms") if hybrid is not None else None
+        means["HYBRID"] = hybrid.steady("mean") if hybrid is not None else None
         paper = PAPER_TABLE_II.get((PAPER_SCENES.get(scene, scene), path))
         rows.append([scene, path, _ms(means["RASTER"]), _ms(means["HYBRID"]), _ms(means["RAYTRACE"]),
                      _number(_ratio(means["HYBRID"], means["RASTER"]), ".2f"),
@@ -63,46 +56,53 @@ def table_ii_rows(groups):
 
 
 def _sections(runs, groups, references, errors, files, rows=None, regrets=None, pops=None, oracle_results=None):
-    """The report as a list of items: ('h', text), ('p', text), ('table', _Table), ('img', file)."""
+    """The report as a list of items: ('h', text), ('p', text), ('table', Table), ('img', file)."""
     rows = rows or []
     regrets = regrets or {}
     pops = pops or {}
     items = [("h1", "PHRT report")]
-    items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are "
-                       f"means over the frames of each run, in milliseconds."))
+    items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are steady: over the "
+                       f"frames after each run's first, one-time work out (the first frame's own cost is in the "
+                       f"Runs table); milliseconds per frame."))
+    items.append(("img", files.error_vs_time_png.name,
+                  "Mean LDR-FLIP (left) and relMSE (right) against steady mean frame time: each selection "
+                  "variant's runs joined from raster through its budgets to ray tracing, the Pareto front dashed, "
+                  "each hybrid point's budget marked (a tick dotted to the point, and a red line per budget)."))
+    items += results_sections(rows)
 
-    items.append(("table", _Table(
+    items.append(("table", Table(
         "Render times (ms per frame), after the paper's Table II",
         ["Scene", "Path", "Raster rendering", "Hybrid rendering", "Ray tracing rendering", "Hybrid / raster",
          "Paper: hybrid / raster", "Ray tracing / hybrid", "Paper: ray tracing / hybrid", "Hybrid run"],
         table_ii_rows(groups),
-        "Mean time to render a frame of the path in each mode, laid out like the paper's Table II, "
+        "Steady mean time to render a frame of the path in each mode, laid out like the paper's Table II, "
         "with our ratios beside the paper's own (its Table II: 640x480, 1000 frames per path, a GTX 460M); "
         "milliseconds on different machines do not compare, ratios may. The arcade scene stands for the "
         "paper's Sponza, atrium for its atrium. The hybrid column is the paper's heuristic (measured "
         f"cost, I = {defaults.SELECTION_WEIGHT:g}, R order, paper relevance) at the budget nearest "
         f"{defaults.BUDGET_AT:g} of the way from raster to ray traced time, or the only hybrid run.")))
 
+    items += _sweep_sections(rows, groups, regrets, pops, oracle_results, files)
+
     run_rows = []
     for run in runs:
-        frames, total = run.column("total_ms")
         budget = run.summary.get("budget_ms")
-        within = (f"{100.0 * np.mean(total <= budget):.0f}%"
-                  if budget and total.size and run.mode == "HYBRID" else "–")
+        within = run.within_budget() if run.mode == "HYBRID" else None
         run_rows.append([
             run.label, f"{run.scene} / {run.path}", run.mode.lower(),
-            _number(budget, "g"), str(len(run.frames)), _ms(run.mean("total_ms")),
-            _ms(run.percentile("total_ms", 50)), _ms(run.percentile("total_ms", 95)),
-            _ms(float(total.max()) if total.size else None),
+            _number(budget, ".0f"), str(len(run.frames)), _ms(run.first_frame_ms), _ms(run.steady("mean")),
+            _ms(run.steady("p50")), _ms(run.steady("p95")), _ms(run.steady("max")),
             _ms(run.mean("raster_ms")), _ms(run.mean("select_ms")), _ms(run.mean("trace_ms")),
-            _ms(run.mean("composite_ms")), _number(run.mean("n_selected"), ".1f"), within])
-    items.append(("table", _Table(
+            _ms(run.mean("composite_ms")), _number(run.mean("n_selected"), ".1f"),
+            "–" if within is None else f"{100.0 * within:.0f}%"])
+    items.append(("table", Table(
         "Runs",
-        ["Run", "Scene / path", "Mode", "Budget ms", "Frames", "Mean ms", "p50 ms", "p95 ms",
+        ["Run", "Scene / path", "Mode", "Budget ms", "Frames", "First frame ms", "Mean ms", "p50 ms", "p95 ms",
          "Max ms", "Raster ms", "Select ms", "Trace ms", "Composite ms", "Mean selected",
          "Within budget"], run_rows,
-        "Stage columns are means per frame; 'within budget' is the share of hybrid frames "
-        "whose total time met the budget.")))
+        "Frame time statistics are steady (the frames after the first, one-time work out); the first "
+        "frame's own time beside them. Stage columns are means per frame; 'within budget' is the share of "
+        "steady hybrid frames whose time met the budget.")))
 
     error_rows = []
     for run in runs:
@@ -114,7 +114,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             str(len(outcome.per_frame)) if run is not reference else str(len(run.frames)),
             _number(outcome.mean("flip"), ".4f"), _number(outcome.mean("relmse"), ".3g"),
             _number(outcome.mean("psnr_db"), ".2f"), outcome.note])
-    items.append(("table", _Table(
+    items.append(("table", Table(
         "Error against the reference",
         ["Run", "Scene / path", "Mode", "Reference", "Frames compared", "Mean LDR-FLIP",
          "relMSE", "PSNR dB", "Note"], error_rows,
@@ -125,11 +125,6 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
         f"compared frames, except PSNR: the PSNR of the mean per-frame MSE (a frame identical "
         f"to the reference would otherwise count at the {metrics.PSNR_CAP_DB:g} dB cap). "
         f"Per-frame values: [{files.errors_csv.name}]({files.errors_csv.name}).")))
-    items.append(("img", files.error_vs_time_png.name,
-                  "Mean LDR-FLIP (left) and relMSE (right) against mean frame time: each selection variant's "
-                  "runs joined from raster through its budgets to ray tracing, the Pareto front dashed, each "
-                  "hybrid point's budget marked (a tick dotted to the point, and a red line per budget)."))
-    items += _sweep_sections(rows, groups, regrets, pops, oracle_results, files)
     items.append(("img", files.timeline_png.name,
                   "Frame time of each run per frame with the budget (dashed), and selected elements."))
 
@@ -144,7 +139,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             _number(float(values.mean()) if values.size else None, ".2f"),
             _number(float(values.max()) if values.size else None, ".2f"),
             ", ".join(f"{element} ({rate:.2f})" for rate, element in worst) or "none"])
-    items.append(("table", _Table(
+    items.append(("table", Table(
         "Selection stability",
         ["Run", "Mode", "Elements", "Mean flips / element / 100 frames", "Max",
          "Worst elements"], stability_rows,
@@ -157,7 +152,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
     for key, title in (("cpu_model", "CPU"), ("cores", "Cores")):
         machine_rows.append([title, ", ".join(sorted(
             {str((run.summary.get("machine") or {}).get(key)) for run in runs}))])
-    items.append(("table", _Table("Machine and versions", ["", ""], machine_rows)))
+    items.append(("table", Table("Machine and versions", ["", ""], machine_rows)))
     return items
 
 
@@ -185,7 +180,7 @@ SWEEP_TABLE_FORMATS = (("run", "Run", None), ("mode", "Mode", None), ("variant",
 
 def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     items = []
-    items.append(("table", _Table(
+    items.append(("table", Table(
         SWEEP_TABLE_TITLE, [title for _, title, _ in SWEEP_TABLE_FORMATS],
         [[(_number(row[key], spec) if spec else str(row[key])) if row[key] is not None else "–"
           for key, _, spec in SWEEP_TABLE_FORMATS] for row in rows],
@@ -205,7 +200,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     for (scene, path), variants in by_budget.items():
         fractions = sorted({fraction for per_budget in variants.values() for fraction in per_budget})
         if len(variants) > 1:
-            items.append(("table", _Table(
+            items.append(("table", Table(
                 f"Selection knobs: {scene} / {path}",
                 ["Selection"] + [f"at {fraction:.2f}: LDR-FLIP / regret" for fraction in fractions],
                 [[variant] + [(f"{_number(per_budget[f]['flip'], '.4f')} / {_number(per_budget[f]['regret'], '.4f')}"
@@ -235,7 +230,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
         every = oracle_results.info.get("every") if oracle_results is not None else oracle.DEFAULT_EVERY
         link = (f" Per frame: [{oracle.REGRET_CSV}]({oracle.REGRET_CSV}); each candidate's measured benefit "
                 f"and cost: [{oracle.CANDIDATES_CSV}]({oracle.CANDIDATES_CSV})." if oracle_results is not None else "")
-        items.append(("table", _Table(
+        items.append(("table", Table(
             "Regret against the oracle",
             ["Run", "Selection", "Budget ms", "Sampled frames", "Heuristic LDR-FLIP", "Oracle LDR-FLIP",
              "Mean regret", "Max regret", "Lost %", "Frames the oracle chose otherwise", "Frames over T",
@@ -270,7 +265,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                           if pop.measured) or "none",
                 pop.note or ("reference" if run.mode == "RAYTRACE" and not pop.pops else "")])
     if pop_rows:
-        items.append(("table", _Table(
+        items.append(("table", Table(
             "Popping",
             ["Run", "Mode", "Flips", "Flips / element / 100 frames", "Popping / 100 frames", "Mean per flip",
              "Worst elements (flips, summed popping)", "Note"], pop_rows,
@@ -287,37 +282,43 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
 
 
 def relevance_verdict(paper, error):
-    """Which relevance wins over the budgets both ran ({budget_at: sweep row}): the mean LDR-FLIP
-    over those budgets (the area under each curve), the budgets where each is lower, and the
-    mean regret.  Returns (text, relative change of the mean LDR-FLIP or None)."""
+    """The paper's relevance against the error-aware one over the budgets both ran ({budget_at: sweep
+    row}): at each budget a difference only where the captured shares' 90% intervals do not overlap
+    ("no difference" otherwise), then the mean LDR-FLIP over those budgets and the budgets where each
+    is lower, as numbers.  Returns (text, relative change of the mean LDR-FLIP or None)."""
     shared = sorted(fraction for fraction in set(paper) & set(error)
                     if paper[fraction]["flip"] is not None and error[fraction]["flip"] is not None)
     if not shared:
         return "the two relevances could not be compared (no error measured).", None
+    said = {"error-aware": 0, "paper": 0, captured.NO_DIFFERENCE: 0}
+    for fraction in shared:
+        verdict = captured.verdict("error-aware", _judged(error[fraction]), "paper", _judged(paper[fraction]))
+        said[verdict.replace(" captures more", "")] += 1
+    if said["error-aware"] == said["paper"] == 0:
+        head = (f"no difference at any of the {len(shared)} budget(s) (the captured shares' 90% intervals "
+                f"overlap, or there is no oracle)")
+    else:
+        head = (f"the error-aware relevance captures more at {said['error-aware']}, the paper's at "
+                f"{said['paper']}, no difference at {said[captured.NO_DIFFERENCE]} of the {len(shared)} budget(s)")
     flip_paper = float(np.mean([paper[f]["flip"] for f in shared]))
     flip_error = float(np.mean([error[f]["flip"] for f in shared]))
     lower = sum(1 for f in shared if error[f]["flip"] < paper[f]["flip"])
     higher = sum(1 for f in shared if error[f]["flip"] > paper[f]["flip"])
     change = (flip_error - flip_paper) / flip_paper if flip_paper > 0 else None
-    if flip_error == flip_paper:
-        head = "neither relevance wins"
-    else:
-        head = f"the {'error-aware' if flip_error < flip_paper else 'paper'} relevance wins"
-    text = (f"{head}: mean LDR-FLIP over the {len(shared)} budget(s) {flip_paper:.4f} with the paper's R, "
-            f"{flip_error:.4f} with the error-aware R"
-            + (f" ({100 * change:+.1f}%)" if change is not None else "")
+    text = (f"{head}; mean LDR-FLIP over the budgets {flip_paper:.3f} with the paper's R, "
+            f"{flip_error:.3f} with the error-aware R"
+            + (f" ({100 * change:+.0f}%)" if change is not None else "")
             + f"; the error-aware R is lower at {lower} and higher at {higher} of them")
-    regrets = [(paper[f]["regret"], error[f]["regret"]) for f in shared
-               if paper[f]["regret"] is not None and error[f]["regret"] is not None]
-    if regrets:
-        text += (f"; mean regret {np.mean([a for a, _ in regrets]):.4f} (paper R) against "
-                 f"{np.mean([b for _, b in regrets]):.4f} (error-aware R)")
-    shares = [(paper[f]["regret_share"], error[f]["regret_share"]) for f in shared
-              if paper[f].get("regret_share") is not None and error[f].get("regret_share") is not None]
+    shares = [(paper[f]["captured"], error[f]["captured"]) for f in shared
+              if paper[f].get("captured") is not None and error[f].get("captured") is not None]
     if shares:
-        text += (f", losing {100 * np.mean([a for a, _ in shares]):.0f}% against "
-                 f"{100 * np.mean([b for _, b in shares]):.0f}% of what the oracle gains over raster")
+        text += (f"; captured {np.mean([a for a, _ in shares]):.2f} (paper R) against "
+                 f"{np.mean([b for _, b in shares]):.2f} (error-aware R) of the oracle's error reduction")
     return text + ".", change
+
+
+def _judged(row):
+    return captured.Captured(share=row.get("captured"), low=row.get("captured_lo"), high=row.get("captured_hi"))
 
 
 def _relevance_comparison(scene, path, paper, error):
@@ -333,7 +334,7 @@ def _relevance_comparison(scene, path, paper, error):
                       _number(a["regret"], ".4f"), _number(b["regret"], ".4f"),
                       _number(a["popping"], ".4f"), _number(b["popping"], ".4f")])
     verdict, _ = relevance_verdict(paper, error)
-    return [("table", _Table(
+    return [("table", Table(
         f"Paper relevance against error-aware relevance: {scene} / {path}",
         ["Budget at", "Budget ms", "LDR-FLIP, paper R", "LDR-FLIP, error-aware R", "Change",
          "Regret, paper R", "Regret, error-aware R", "Popping / 100, paper R", "Popping / 100, error-aware R"],
