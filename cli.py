@@ -261,7 +261,7 @@ def _budget_fractions(args):
 
 
 def command_sweep(args):
-    from .phrt_addon import oracle as oracle_module
+    from .phrt_addon.report import oracle as oracle_module
     from .phrt_addon import plan as plan_module
     _check_executor_options(args.workers, args.scheduler)
     fractions = _budget_fractions(args)

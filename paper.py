@@ -74,7 +74,8 @@ def main(argv=None):
 def _run(args, out, started, executor, on_cluster):
     from . import cli
     from .engine import sweep as sweep_engine
-    from .phrt_addon import oracle, plan, report
+    from .phrt_addon import plan, report
+    from .phrt_addon.report import oracle
 
     common = (["--frames", args.frames] if args.frames else []) + \
              (["--resolution", args.resolution] if args.resolution else [])

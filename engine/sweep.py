@@ -17,9 +17,9 @@ from pathlib import Path
 
 from .. import blender_process
 from ..phrt_addon import executors
-from ..phrt_addon import oracle as oracle_module
+from ..phrt_addon.report import oracle as oracle_module
 from ..phrt_addon import plan as plan_module
-from . import oracle as oracle_engine
+from .runs import oracle as oracle_engine
 from . import replay
 
 
@@ -106,8 +106,10 @@ def _run(plan, folder, job, scene, camera, partial) -> str:
                    if plan.job(dependency).mode == "HYBRID"}
         reference = next(folder / dependency for dependency in job.depends_on
                          if plan.job(dependency).mode == "RAYTRACE")
-        info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, every=plan.oracle_every,
-                                        resolution=resolution)
+        raster = next((folder / dependency for dependency in job.depends_on
+                       if plan.job(dependency).mode == "RASTER"), None)
+        info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, raster_dir=raster,
+                                        every=plan.oracle_every, resolution=resolution)
         message = f"{len(info['frames'])} sampled frames, {len(hybrids)} runs"
     else:
         raise ValueError(f"unknown job kind '{job.kind}'")

@@ -2,7 +2,7 @@
 """
 from pathlib import Path
 
-from .. import oracle
+from . import oracle
 from .document import _sections
 from .markup import Table, _html, _markdown
 from .plots import _plot_error_vs_time, _plot_selection_quality, _plot_timeline

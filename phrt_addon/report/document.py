@@ -3,7 +3,8 @@ stability, and with a sweep the runs on the error-time curve, regret, popping an
 """
 import numpy as np
 
-from .. import defaults, metrics, oracle, runlog
+from .. import defaults, metrics, runlog
+from . import oracle
 from . import captured
 from .markup import Table
 from .results import results_sections
