@@ -7,6 +7,7 @@
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
                      [--workers N | --scheduler ADDRESS]
+    phrt rescore SWEEP_DIR [--out DIR]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -59,6 +60,10 @@ def build_parser():
     report.add_argument("runs", nargs="+", metavar="RUN_DIR")
     report.add_argument("--reference", help="reference run (default: the raytrace run among RUN_DIRs)")
     report.add_argument("--out", default="out/report", help="report folder (default: out/report)")
+    rescore = commands.add_parser("rescore", help="judge a sweep's recorded choices again on its oracle's "
+                                                  "measurements, without rendering")
+    rescore.add_argument("sweep_dir", metavar="SWEEP_DIR")
+    rescore.add_argument("--out", help="folder for rescore.csv and rescore.md (default: SWEEP_DIR/report)")
     sweep = commands.add_parser("sweep", help="error against run time: raster, raytrace and hybrid at N budgets")
     sweep.add_argument("scene", help="a .blend file or a sample scene name (arcade, atrium)")
     sweep.add_argument("--path", help="camera path (camera object) to replay (default: the scene's first)")
@@ -366,15 +371,26 @@ def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, execut
     return 0
 
 
+def command_rescore(args):
+    from .phrt_addon.report import rescore
+    try:
+        rows, folder = rescore.rescore(args.sweep_dir, args.out)
+    except ValueError as error:
+        raise UserError(str(error).splitlines()[0]) from None
+    print(rescore.markdown(rows), end="")
+    print(f"phrt: rescored {len(rows)} runs: {folder / rescore.RESCORE_CSV}")
+    return 0
+
+
 def main(argv=None):
     as_program = argv is None  # the `phrt` program itself: its stdout ends with its last line
     argv = sys.argv[1:] if argv is None else argv
     try:
         args = build_parser().parse_args(argv)
-        if args.command != "report":  # every other command runs Blender
+        if args.command not in ("report", "rescore"):  # every other command runs Blender
             _import_blender()
         command = {"scenes": command_scenes, "render": command_render, "report": command_report,
-                   "sweep": command_sweep}[args.command]
+                   "rescore": command_rescore, "sweep": command_sweep}[args.command]
         return command(args)
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)
