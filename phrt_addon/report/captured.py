@@ -81,7 +81,10 @@ def block_bootstrap(raster, run, oracle, *, confidence: float = CONFIDENCE, resa
     studentized = np.where(errors > 0, (shares - share) / np.where(errors > 0, errors, 1.0), 0.0)
     tail = 100.0 * (1.0 - confidence) / 2.0
     low_t, high_t = np.percentile(studentized, [tail, 100.0 - tail])
-    return float(share - high_t * own_error), float(share - low_t * own_error)
+    # Within what the resamples reached: a resample whose own error is near 0 (frames where the run
+    # gains exactly nothing) would otherwise stretch the interval far past any share seen.
+    return (float(max(share - high_t * own_error, shares.min())),
+            float(min(share - low_t * own_error, shares.max())))
 
 
 def _standard_error(gained, possible, share):
