@@ -330,7 +330,7 @@ def summarize(frame_rows, selection_rows):
         "frame_start": min(frames) if frames else None,
         "frame_end": max(frames) if frames else None,
         "total_ms": steady_total,
-        "total_ms_all_frames": {
+        "all_frames_total_ms": {
             "mean": mean(total),
             "p50": float(np.percentile(total, 50)) if total.size else None,
             "p95": float(np.percentile(total, 95)) if total.size else None,
