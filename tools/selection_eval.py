@@ -70,7 +70,7 @@ def _variants(requested):
 
 def evaluate(args) -> list:
     from phrt import cli
-    from phrt.cli import blender
+    from phrt.cli import blender_process as blender
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     variants = _variants(args.variants)

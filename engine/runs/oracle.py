@@ -13,8 +13,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ...phrt_addon import metrics, runlog
-from ...phrt_addon.report import oracle
+from ...phrt_addon.report import metrics, oracle
+from ...phrt_addon.runs import run_files
 from .. import extract, final
 
 
@@ -68,7 +68,7 @@ class ForcedRenderer:
 
 def _selection_by_frame(run_dir):
     chosen = {}
-    for row in runlog.read_selection(run_dir):
+    for row in run_files.read_selection(run_dir):
         if row["selected"]:
             chosen.setdefault(row["frame"], set()).add(str(row["element"]))
     return chosen
@@ -108,19 +108,19 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
     part of a frame's time comes from the raster run ``raster_dir`` (else from the oracle's own
     frame with nothing traced).  Returns the folder's info."""
     reference_dir = Path(reference_dir)
-    reference_frames = [row["frame"] for row in runlog.read_frames(reference_dir)]
+    reference_frames = [row["frame"] for row in run_files.read_frames(reference_dir)]
     frames = oracle.sampled_frames(reference_frames, every)
-    shared_of = oracle.shared_ms(runlog.read_frames(raster_dir)) if raster_dir is not None else {}
+    shared_of = oracle.shared_ms(run_files.read_frames(raster_dir)) if raster_dir is not None else {}
     runs = {}
     for label, run_dir in hybrid_dirs.items():
-        summary = runlog.read_summary(run_dir)
-        runs[label] = {"dir": Path(run_dir), "frames": {row["frame"]: row for row in runlog.read_frames(run_dir)},
+        summary = run_files.read_summary(run_dir)
+        runs[label] = {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_files.read_frames(run_dir)},
                        "selected": _selection_by_frame(run_dir), "budget_ms": summary.get("budget_ms")}
     budgets = _budget_groups(runs)
     measured, regret_rows = [], []
     with ForcedRenderer(scene, camera, resolution) as renderer:
         for count, frame in enumerate(frames):
-            reference_path = runlog.frame_image_path(reference_dir, frame)
+            reference_path = run_files.frame_image_path(reference_dir, frame)
             if reference_path is None:
                 continue
             reference = metrics.read_image(reference_path)
@@ -166,7 +166,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 for label in labels:
                     run = runs[label]
                     row = run["frames"].get(frame)
-                    run_image = runlog.frame_image_path(run["dir"], frame)
+                    run_image = run_files.frame_image_path(run["dir"], frame)
                     if row is None or run_image is None:
                         continue
                     heuristic_set = frozenset(run["selected"].get(frame, set()))

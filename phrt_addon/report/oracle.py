@@ -65,8 +65,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import runlog
+from ..runs import run_log
 from ..runs import steady
+from .. import schema
 
 ORACLE_DIR = "oracle"
 ORACLE_JSON = "oracle.json"
@@ -226,7 +227,7 @@ def median_ms(timings) -> tuple[float, float]:
 
 def summary_hash(run_dir) -> str | None:
     """Hash of a run's ``summary.json`` (None when missing): what the oracle was computed from."""
-    path = Path(run_dir) / runlog.SUMMARY_JSON
+    path = Path(run_dir) / schema.SUMMARY_JSON
     if not path.is_file():
         return None
     return hashlib.blake2b(path.read_bytes(), digest_size=12).hexdigest()
@@ -248,7 +249,7 @@ def write_csv(path, columns, rows):
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(columns)
         for row in rows:
-            writer.writerow([runlog.format_value(row.get(key)) for key in columns])
+            writer.writerow([run_log.format_value(row.get(key)) for key in columns])
     os.replace(temporary, path)
 
 
@@ -339,7 +340,7 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
             "frames_oracle_differs": sum(1 for row in rows if row["oracle"] != row["heuristic"]),
             "budget_ms": rows[0]["budget_ms"] if rows else None,
         }
-    info = runlog._round_json(runlog._json_safe({
+    info = run_log._round_json(run_log._json_safe({
         "every": every, "frames": list(frames), "runs": runs, "timings": TIMINGS,
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "

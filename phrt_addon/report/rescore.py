@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import runlog
+from .. import schema
+from ..runs import run_files
 from . import captured, oracle
 
 RESCORE_CSV = "rescore.csv"
@@ -72,7 +73,7 @@ def spearman(first, second) -> float | None:
 def rescore_run(run_dir, rows, frames) -> dict:
     """The rescore row of one run: ``rows`` its regret rows, ``frames`` {frame: FrameCandidates}."""
     selection = {}
-    for row in runlog.read_selection(run_dir):
+    for row in run_files.read_selection(run_dir):
         selection.setdefault(int(row["frame"]), []).append(row)
     raster, chosen, best, costs, ratios, estimates, truths = [], [], [], [], [], [], []
     over = 0
@@ -120,7 +121,7 @@ def rescore(sweep_dir, out_dir=None) -> tuple[list, Path]:
     rows = []
     for label in results.runs():
         run_dir = sweep_dir / label
-        if (run_dir / runlog.SELECTION_CSV).is_file():
+        if (run_dir / schema.SELECTION_CSV).is_file():
             rows.append(rescore_run(run_dir, results.rows_of(label), frames))
     out_dir = Path(out_dir) if out_dir is not None else sweep_dir / "report"
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -8,7 +8,7 @@ whole milliseconds, a share to 2 decimals), and a verdict per pair of
 variants that names a winner only when the intervals do not overlap.
 """
 from . import captured
-from .markup import Table
+from .markup import ReportTable
 
 
 def _fixed(value, spec):
@@ -87,7 +87,7 @@ def results_sections(rows) -> list:
         if raster is not None and raytrace is not None:
             intro += (f" Raster: LDR-FLIP {_fixed(raster['flip'], '.3f')} at {_fixed(raster['mean_ms'], '.0f')} ms; "
                       f"ray traced (the reference) {_fixed(raytrace['mean_ms'], '.0f')} ms.")
-        items.append(("table", Table(
+        items.append(("table", ReportTable(
             f"Results: {scene} / {path}",
             ["Budget at", "Budget ms", "Variant", "Captured [90%]", "LDR-FLIP", "Popping / 100", "p95 / budget",
              "Within budget", "Mean ms", "Judged frames", "Min regret", "Beat the oracle"], table, intro)))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from phrt.phrt_addon.report import oracle, rescore
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.runs.run_log import RunLog
 
 
 def test_the_shared_part_is_the_raster_runs_raster_and_composite_its_first_frame_the_steady_median():

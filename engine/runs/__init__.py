@@ -1,0 +1,1 @@
+"""Runs driven through Blender: camera path replays, sweeps, the oracle's renders, budget calibration."""
