@@ -154,9 +154,9 @@ def test_one_oracle_per_budget_fills_the_budgets_nominal_time_for_tracing(replay
     assert info["frames"] == [2, 4]
     rows = results.regret_rows
     assert {row["run"] for row in rows} == {"tight", "ample"} and len(rows) == 4
-    shared = {row["frame"]: row["raster_ms"] + row["composite_ms"] for row in runlog.read_frames(runs["raster"])}
+    shared = {row["frame"]: row["raster_ms"] + row["composite_ms"] for row in run_files.read_frames(runs["raster"])}
     for row in rows:
-        budget = runlog.read_summary(runs[row["run"]])["budget_ms"]
+        budget = run_files.read_summary(runs[row["run"]])["budget_ms"]
         assert row["shared_ms"] == pytest.approx(shared[row["frame"]], rel=1e-5)
         assert row["capacity_ms"] == pytest.approx(max(budget - shared[row["frame"]], 0.0), rel=1e-5)
         assert row["oracle_cost_ms"] <= row["capacity_ms"] + 1e-6
@@ -170,8 +170,8 @@ def test_the_ample_budgets_regret_is_measured_from_both_images(replayed):
     reference = runs["raytrace"]
     for row in results.rows_of("ample"):
         assert set(row["oracle"]) == set(row["heuristic"]), row
-        run_flip = metrics.flip(metrics.read_image(runlog.frame_image_path(reference, row["frame"])),
-                                metrics.read_image(runlog.frame_image_path(runs["ample"], row["frame"])))
+        run_flip = metrics.flip(metrics.read_image(run_files.frame_image_path(reference, row["frame"])),
+                                metrics.read_image(run_files.frame_image_path(runs["ample"], row["frame"])))
         assert row["heuristic_flip"] == pytest.approx(run_flip, rel=1e-4)
         # the oracle's own render of the same subset: traced (its trace time measured), its error measured
         assert row["oracle_trace_ms"] > 0
