@@ -210,7 +210,7 @@ def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budg
                             budget_at=float(fraction), variant=name, overrides={**BASELINE, **VARIANTS[name]},
                             depends_on=[raster.id, raytrace.id]))
     hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
-    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raytrace.id, *hybrids]))
+    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raster.id, raytrace.id, *hybrids]))
     seen = {}
     for job in jobs:
         check_job_id(job.id)

@@ -40,7 +40,7 @@ import numpy as np
 
 from . import atomic
 from .summary import machine_info, summarize
-from ..schema import FRAME_COLUMNS, FRAMES_CSV, REASONS, SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, SUMMARY_JSON
+from ..schema import FRAME_COLUMNS, FRAMES_CSV, REASONS, SELECTION_COLUMNS, SELECTION_CSV, SUMMARY_JSON
 
 
 log = logging.getLogger(__name__)
@@ -250,7 +250,7 @@ class RunLog:
         self._selection.flush()
         self._frames.write([frame_row])
         self._frames.flush()
-        self._frame_values.append(tuple(frame_row.get(key) for key in FRAME_COLUMNS))
+        self._frame_values.append(tuple(frame_row.get(key) for key in FRAME_COLUMNS + ("setup_ms",)))
         for row in selection_rows:
             element = str(row["element"])
             states = self._selection_states.get(element)
@@ -293,7 +293,7 @@ class RunLog:
         return self._write_summary(summary_extra)
 
     def _write_summary(self, summary_extra):
-        frame_rows = [dict(zip(FRAME_COLUMNS, values)) for values in self._frame_values]
+        frame_rows = [dict(zip(FRAME_COLUMNS + ("setup_ms",), values)) for values in self._frame_values]
         selection_states = [{"frame": frame, "element": element, "selected": bool(selected)}
                             for element, (frames, flags) in self._selection_states.items()
                             for frame, selected in zip(frames, flags)]

@@ -10,6 +10,7 @@ import platform
 import numpy as np
 
 from ..schema import STAGE_COLUMNS
+from . import steady
 
 
 def summarize(frame_rows, selection_rows):
@@ -23,18 +24,23 @@ def summarize(frame_rows, selection_rows):
 
     total = column("total_ms")
     frames = [int(row["frame"]) for row in frame_rows]
+    budgets = column("budget_ms")
+    steady_total = steady.steady_stats(frame_rows)
     flips = flips_per_element_per_100(selection_rows)
     rates = np.array(list(flips.values()), dtype=float)
     return {
         "frame_count": len(frame_rows),
         "frame_start": min(frames) if frames else None,
         "frame_end": max(frames) if frames else None,
-        "total_ms": {
+        "total_ms": steady_total,
+        "all_frames_total_ms": {
             "mean": mean(total),
             "p50": float(np.percentile(total, 50)) if total.size else None,
             "p95": float(np.percentile(total, 95)) if total.size else None,
             "max": float(total.max()) if total.size else None,
         },
+        "first_frame_ms": steady.first_frame_ms(frame_rows),
+        "p95_over_budget": steady.over_budget(steady_total["p95"], budgets[0] if budgets.size else None),
         "stage_mean_ms": {name: mean(column(name)) for name in STAGE_COLUMNS},
         "predicted_trace_mean_ms": mean(column("predicted_trace_ms")),
         "mean_n_visible": mean(column("n_visible")),
