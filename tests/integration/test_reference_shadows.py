@@ -22,7 +22,8 @@ bpy = pytest.importorskip("bpy")
 from embreex import rtcore_scene  # noqa: E402
 from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
-from phrt.engine import extract, raster  # noqa: E402
+from phrt.engine import extract  # noqa: E402
+from phrt.engine.gpu.frame import GPUFrame  # noqa: E402
 from phrt.phrt_addon.raster.reference_raster import ReferenceRaster  # noqa: E402
 from phrt.phrt_addon.scene import rules  # noqa: E402
 from phrt.phrt_addon.raster.shadowmap import ShadowMap, light_views  # noqa: E402
@@ -105,7 +106,7 @@ def test_the_gpu_frame_matches_a_reference_that_builds_its_own_shadow_maps():
 
     def job(engine, depsgraph):
         snapshot = extract.extract(depsgraph)
-        frame = raster.GPUFrame(snapshot)
+        frame = GPUFrame(snapshot)
         frame.draw()
         gbuffer = frame.gbuffer()
         opaque_albedo, transparent_albedo = frame.read_albedo()
