@@ -1,0 +1,1 @@
+"""Runs over a camera path that replay, sweep, judge or advise (see each module)."""

@@ -1,0 +1,100 @@
+"""The tagging advisor on real renders (bpy, Embree, EXR, LDR-FLIP): the hand-built scene of
+``advice_scene.py`` advised over frames 1-4 (frames 2 and 4 judged), at a budget that covers
+everything (1e6 ms), so each item's advice depends only on what tracing it changes, not on the
+machine's timings."""
+import csv
+import json
+import os
+import tempfile
+
+os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="phrt-test-user-"))
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+bpy = pytest.importorskip("bpy")
+
+from advice_scene import advice_scene  # noqa: E402
+from phrt.engine import final, item_measure  # noqa: E402
+from phrt.engine import oracle as oracle_engine  # noqa: E402
+from phrt.engine.runs import advise  # noqa: E402
+from phrt.phrt_addon import metrics, oracle, runlog  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def advised(blender, tmp_path_factory):
+    final.release_caches()
+    scene, camera = advice_scene()
+    out = tmp_path_factory.mktemp("advice")
+    written = advise.run_advice(scene, camera, (1, 4), out, budget_at=(), budget_ms=(1e6,), every=2, scene_label="hand")
+    with open(written["csv"], newline="") as handle:
+        rows = {(row["element"], row["effect"]): row for row in csv.DictReader(handle)}
+    yield scene, camera, out, written, rows
+    final.release_caches()
+
+
+def test_the_advice_keeps_the_mirror_untags_the_matte_tags_the_chrome_and_drops_the_glass_shadow(advised):
+    _, _, _, _, rows = advised
+    advice = {item: row["recommendation"] for item, row in rows.items()}
+    assert advice[("Mirror", "reflections")] == "keep", rows[("Mirror", "reflections")]["reason"]
+    assert advice[("MatteCube", "reflections")] in ("untag", "drop_effect")
+    assert advice[("ChromeSphere", "reflections")] == "tag", rows[("ChromeSphere", "reflections")]["reason"]
+    assert advice[("GlassBall", "shadows")] == "drop_effect", rows[("GlassBall", "shadows")]["reason"]
+    assert advice[("GlassBall", "refractions")] == "keep"
+    assert rows[("ChromeSphere", "reflections")]["tagged"] == "0" and rows[("Mirror", "reflections")]["tagged"] == "1"
+
+
+def test_each_reason_names_its_measured_numbers(advised):
+    _, _, _, _, rows = advised
+    for row in rows.values():
+        assert f"{float(row['benefit']):.5f} LDR-FLIP" in row["reason"], row["reason"]
+        assert f"{float(row['cost_ms']):.2f} ms" in row["reason"], row["reason"]
+
+
+def test_the_files_and_the_per_pixel_maps_are_written(advised):
+    _, _, out, written, rows = advised
+    for name in ("csv", "json", "md", "html", "chart", "strips", "tags"):
+        assert written[name].is_file() and written[name].stat().st_size > 100, name
+    document = json.loads(written["json"].read_text())
+    assert document["prospects"]["judged"] == ["ChromeSphere"] and document["judged_frames"] == 2
+    mirror = next(item for item in document["items"] if item["item"] == "Mirror/reflections")
+    assert (out / "maps" / mirror["map"]).is_file()
+    tags = {entry["element"]: entry for entry in json.loads(written["tags"].read_text())["elements"]}
+    assert tags["MatteCube"]["visible_in_ray_tracing"] is False and tags["MatteCube"]["culling_priority"] == 8
+    assert tags["Mirror"]["visible_in_ray_tracing"] is True and tags["Mirror"]["culling_priority"] == 0
+
+
+def test_the_scene_is_left_as_it_was(advised):
+    scene, _, _, _, _ = advised
+    chrome = bpy.data.objects["ChromeSphere"].phrt
+    assert not chrome.candidate and chrome.shadows and chrome.reflections and chrome.refractions
+    glass = bpy.data.objects["GlassBall"].phrt
+    assert glass.candidate and glass.shadows and glass.refractions and not glass.reflections
+
+
+def test_benefit_per_ms_is_the_oracles_own_measurement_on_the_same_frames(advised):
+    """The oracle measures the Mirror element (tagged for reflections only: the item
+    Mirror/reflections) on the same judged frames against the same reference: the same error drop,
+    and the advice's benefit per ms is the ratio of the summed drops to the summed costs it logged."""
+    scene, camera, out, written, rows = advised
+    document = json.loads(written["json"].read_text())
+    mirror = next(item for item in document["items"] if item["item"] == "Mirror/reflections")
+    reference_dir = out / advise.RUNS_DIR / "reference"
+    hybrid = next((out / advise.RUNS_DIR).glob("hybrid-paper-*"))
+    info = oracle_engine.run_oracle(scene, camera, reference_dir, {"paper": hybrid}, out / "oracle", every=1)
+    oracle_rows = [row for row in oracle.read_csv(out / "oracle" / oracle.CANDIDATES_CSV)
+                   if row["element"] == "Mirror"]
+    by_frame = {int(row["frame"]): float(row["benefit"]) for row in oracle_rows}
+    assert info["frames"] == [2, 4]
+    for frame, benefit in zip(mirror["frames"], mirror["benefit_by_frame"]):
+        assert benefit == pytest.approx(by_frame[frame], abs=1e-5)
+    with oracle_engine.ForcedRenderer(scene, camera) as renderer:
+        reference = metrics.read_image(runlog.frame_image_path(reference_dir, 2))
+        renderer.render(2, ("Mirror",))
+        raster = item_measure.measure_subset(renderer, 2, (), reference, timings=1)
+        alone = item_measure.measure_subset(renderer, 2, ("Mirror",), reference)
+    assert raster.flip - alone.flip == pytest.approx(mirror["benefit_by_frame"][0], abs=1e-5)
+    assert alone.trace_ms > 0
+    ratio = sum(max(b, 0.0) for b in mirror["benefit_by_frame"]) / sum(mirror["cost_ms_by_frame"])
+    assert float(rows[("Mirror", "reflections")]["benefit_per_ms"]) == pytest.approx(ratio, rel=1e-4)
+    assert np.isfinite(ratio) and ratio > 0
