@@ -98,3 +98,33 @@ def test_benefit_per_ms_is_the_oracles_own_measurement_on_the_same_frames(advise
     ratio = sum(max(b, 0.0) for b in mirror["benefit_by_frame"]) / sum(mirror["cost_ms_by_frame"])
     assert float(rows[("Mirror", "reflections")]["benefit_per_ms"]) == pytest.approx(ratio, rel=1e-4)
     assert np.isfinite(ratio) and ratio > 0
+
+
+def test_applying_recommendations_changes_exactly_their_properties_in_one_undoable_step(advised):
+    """Last in this module: it changes the scene.  ``bpy.ops.ed.undo`` needs a window, which Blender
+    as a module in background mode has none of (its poll fails: checked on bpy 5.0.1), so where it
+    cannot run the test checks what makes the change one undo step: a single operator call
+    registered with the UNDO option."""
+    from phrt.operators import advisor
+    _, _, _, written, _ = advised
+    window_manager = bpy.context.window_manager
+    advisor.fill_list(window_manager, written["csv"])
+    index = {(item.element, item.effect): position for position, item in enumerate(window_manager.phrt_advice)}
+    names = [obj.name for obj in bpy.data.objects if obj.type == "MESH"]
+    before = {name: item_measure.read_settings(bpy.data.objects[name]) for name in names}
+    expected = {name: dict(settings) for name, settings in before.items()}
+    expected["GlassBall"]["shadows"] = False
+    expected["MatteCube"]["candidate"] = False
+    expected["ChromeSphere"].update(candidate=True, shadows=False, refractions=False, reflections=True)
+    assert "UNDO" in advisor.PHRT_OT_apply_advice.bl_options
+    for item in (("GlassBall", "shadows"), ("MatteCube", "reflections"), ("ChromeSphere", "reflections")):
+        assert bpy.ops.phrt.apply_advice(index=index[item]) == {"FINISHED"}
+    after = {name: item_measure.read_settings(bpy.data.objects[name]) for name in names}
+    assert after == expected
+    assert window_manager.phrt_advice[index[("GlassBall", "shadows")]].applied
+    assert bpy.ops.phrt.apply_advice(index=index[("Mirror", "reflections")]) == {"FINISHED"}  # keep: no change
+    assert item_measure.read_settings(bpy.data.objects["Mirror"]) == before["Mirror"]
+    if bpy.ops.ed.undo.poll():
+        for _ in range(4):
+            bpy.ops.ed.undo()
+        assert {name: item_measure.read_settings(bpy.data.objects[name]) for name in names} == before
