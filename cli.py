@@ -7,6 +7,7 @@
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
                      [--workers N | --scheduler ADDRESS]
+    phrt advise SCENE [--path NAME] [--frames A-B] [--budget-at F,F...] [--resolution WxH] [--out DIR]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -30,6 +31,7 @@ from .blender_process import blender as _blender
 from .blender_process import import_blender as _import_blender
 from .blender_process import quiet_exit as _quiet_exit
 from .blender_process import quiet_stdout as _quiet_stdout
+from . import advise_command
 
 
 class _Parser(argparse.ArgumentParser):
@@ -82,6 +84,7 @@ def build_parser():
                        help="run the plan on the existing Dask cluster whose scheduler is at ADDRESS "
                             "(tcp://HOST:8786); its workers need --resources phrt=1 and the sweep folder "
                             "(docs/cluster.md)")
+    advise_command.add_parser(commands)
     return parser
 
 
@@ -374,7 +377,8 @@ def main(argv=None):
         if args.command != "report":  # every other command runs Blender
             _import_blender()
         command = {"scenes": command_scenes, "render": command_render, "report": command_report,
-                   "sweep": command_sweep}[args.command]
+                   "sweep": command_sweep,
+                   "advise": lambda parsed: advise_command.command_advise(parsed, parse_resolution)}[args.command]
         return command(args)
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)
