@@ -190,7 +190,7 @@ def books(measured, tagged, budgets_ms, shared_ms, selections=None, judged_frame
             book.oracle_share = {fraction: chosen_counts[key][fraction] / len(book.frames) for fraction in budgets_ms}
         else:
             book.oracle_share = {fraction: 0.0 for fraction in budgets_ms}
-        for name, by_budget in (selections or {}).items():
+        for name, by_budget in (selections or {}).items() if book.tagged else ():  # untagged: no selection sees it
             book.selection_share[name] = {fraction: float(shares.get(key, 0.0))
                                           for fraction, shares in by_budget.items()}
     return result
