@@ -19,7 +19,7 @@ $(STAMP): requirements.txt pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m phrt.demo --out out/demo
+	$(PY) -m phrt.cli.demo --out out/demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q
@@ -29,16 +29,16 @@ test-fast: $(STAMP)
 	$(PY) -m pytest -q tests/core
 
 bench: $(STAMP)
-	$(PY) -m phrt.bench
+	$(PY) -m phrt.cli.bench
 
 # The paper's experiment on both sample scenes: 2 scenes x 3 paths x 3 modes x 1000 frames at
 # 640x480, a 5-budget sweep of path1 of each, one report in out/paper/report/.  LONG: many hours
 # on 2 cores (about a second per frame); not part of `make test`.  Interrupted, it resumes:
-# complete runs are skipped.  `python -m phrt.paper --help` for a shorter one.
+# complete runs are skipped.  `python -m phrt.cli.paper --help` for a shorter one.
 # `make paper WORKERS=N` runs it on a Dask LocalCluster of N worker processes, `make paper
 # SCHEDULER=tcp://HOST:8786` on an existing Dask cluster (docs/cluster.md).
 paper: $(STAMP)
-	$(PY) -m phrt.paper --out out/paper $(if $(WORKERS),--workers $(WORKERS)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+	$(PY) -m phrt.cli.paper --out out/paper $(if $(WORKERS),--workers $(WORKERS)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 # Long runs kept out of `make test` (tools/soak.py): a 1000-frame HYBRID replay of arcade at
 # 320x240, budget 600 ms (RSS after frame 100 vs 1000 < 50 MB, GPU/Embree objects created ==

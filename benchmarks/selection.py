@@ -20,8 +20,9 @@ import time
 
 import numpy as np
 
-from ..phrt_addon.cost_model import EFFECTS, CostModel, FrameStats
-from ..phrt_addon.heuristic import FrameElements, SelectionSettings, select
+from ..phrt_addon.select.cost_model import EFFECTS, CostModel, FrameStats
+from ..phrt_addon.select.heuristic import select
+from ..phrt_addon.select.selection_terms import FrameElements, SelectionSettings
 
 SIZES = (10, 100, 1_000, 10_000, 100_000)
 TARGETS_MS = {100: 1.0, 10_000: 20.0}

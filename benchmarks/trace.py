@@ -25,9 +25,9 @@ import time
 
 import numpy as np
 
-from ..phrt_addon import shading
-from ..phrt_addon.scene import Camera, Material, MeshInstance, SceneSnapshot
-from ..phrt_addon.trace_scene import TraceScene
+from ..phrt_addon.scene import shading
+from ..phrt_addon.scene.snapshot import Camera, Material, MeshInstance, SceneSnapshot
+from ..phrt_addon.trace.embree_scene import TraceScene
 
 WIDTH, HEIGHT = 640, 480
 REPEATS = 5

@@ -14,10 +14,10 @@ import numpy as np
 
 from .. import compat
 from . import session
-from ..phrt_addon import naming, rules
-from ..phrt_addon.metrics import srgb_to_linear
-from ..phrt_addon.scene import (Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings,
-                                geometry_key)
+from ..phrt_addon import naming
+from ..phrt_addon.scene import rules
+from ..phrt_addon.report.metrics import srgb_to_linear
+from ..phrt_addon.scene.snapshot import Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings, geometry_key
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL"}
 MESH_CONVERTIBLE = {"MESH", "CURVE", "SURFACE", "META", "FONT"}

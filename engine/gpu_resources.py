@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..phrt_addon import draw_chunks, rules
+from ..phrt_addon.raster import draw_chunks
+from ..phrt_addon.scene import rules
 from . import shaders
 
 def gpu_module():
@@ -120,7 +121,7 @@ class GPUResources:
     def shader(self, name: str):
         shader = self._shaders.get(name)
         if shader is None:
-            from ..phrt_addon.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
+            from ..phrt_addon.raster.shadowmap import DEPTH_BIAS_TEXELS, NORMAL_OFFSET_TEXELS
             gpu = gpu_module()
             builders = {
                 "gbuffer": lambda: shaders.build_gbuffer(gpu),

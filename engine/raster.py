@@ -26,10 +26,11 @@ import time
 
 import numpy as np
 
-from ..phrt_addon import draw_chunks, rules, shading
-from ..phrt_addon.gbuffer import GBuffer, GBufferLayer
-from ..phrt_addon.scene import SceneSnapshot
-from ..phrt_addon.shadowmap import ShadowMap, light_views
+from ..phrt_addon.raster import draw_chunks
+from ..phrt_addon.scene import rules, shading
+from ..phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
+from ..phrt_addon.scene.snapshot import SceneSnapshot
+from ..phrt_addon.raster.shadowmap import ShadowMap, light_views
 from . import shaders
 from . import session
 from .gpu_resources import GPUResources, ShadowAtlas, gpu_module

@@ -5,10 +5,10 @@ source-string constructor) and created once per process by
 ``engine/gpu_resources.py``.
 
 The lighting and composite shaders implement the surface response of
-``phrt_addon/shading.py`` (Lambert + GGX/Smith/Schlick, the uniform-environment
+``phrt_addon/scene/shading.py`` (Lambert + GGX/Smith/Schlick, the uniform-environment
 ambient and exact dielectric Fresnel) and the shadow-map lookup of
-``phrt_addon/shadowmap.py`` line for line, so the GPU image of a G-buffer equals
-the numpy reference (``phrt_addon/lighting.py``); ``tests/integration/
+``phrt_addon/raster/shadowmap.py`` line for line, so the GPU image of a G-buffer equals
+the numpy reference (``phrt_addon/raster/reference_raster.py``); ``tests/integration/
 test_gpu_frame.py`` checks the two agree within 1e-3 relative on lit pixels.
 
 G-buffer layout (one texture set per layer, opaque and transparent):
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import re
 
-from ..phrt_addon import rules
+from ..phrt_addon.scene import rules
 
 # Materials are stored in a float texture, MATERIAL_TABLE_WIDTH per row pair:
 # row 2k: (transmission, ior, alpha, 0); row 2k+1: (emission rgb, 0).

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..phrt_addon import naming
 from ..phrt_addon.frame import FrameRenderer
-from ..phrt_addon.scene import Camera
+from ..phrt_addon.scene.snapshot import Camera
 from . import extract, final, session
 
 # What each decision looks like in the overlay (linear RGBA).  Elements that are

@@ -1,4 +1,4 @@
-"""PHRT operators: thin Blender skins over ``engine/replay.py`` and the run logs.
+"""PHRT operators: thin Blender skins over ``engine/runs/replay.py`` and the run logs.
 
 - ``phrt.replay_path``: replay a camera path in one or more modes (``replay_path.py``);
 - ``phrt.export_selection_log``: the heuristic's decisions as CSV or JSON (``selection_log.py``);

@@ -14,8 +14,8 @@ from pathlib import Path
 import bpy
 from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
-from ..engine import item_measure, replay
-from ..engine.runs import advise
+from ..engine.runs import advise, item_measure
+from ..engine.runs import camera_path as replay
 from ..phrt_addon.advise import items as advice_items
 from ..phrt_addon.advise import recommend
 from . import replay_path

@@ -8,9 +8,9 @@ Two ways to run, same files:
   between frames on Esc.  What was rendered stays valid: complete frames, flushed
   logs and a ``summary.json`` marked ``"cancelled": true`` and ``"partial": true``.
 - From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
-  ``engine.replay.replay()`` runs every frame of every mode to the end.
+  ``engine.runs.replay.replay()`` runs every frame of every mode to the end.
 
-The modal path drives ``engine.replay.SteppedReplay`` (of which ``replay()`` is the
+The modal path drives ``engine.runs.replay.SteppedReplay`` (of which ``replay()`` is the
 blocking loop), so both write exactly the same files.
 docs/batch.md has the ``blender -b`` command lines.
 """
@@ -20,10 +20,12 @@ from pathlib import Path
 import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
-from ..engine import candidate_list, replay
+from ..engine import candidate_list
+from ..engine.runs import replay
+from ..engine.runs import camera_path
 from ..properties import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_FLAG_ITEMS
-from ..phrt_addon import runlog
-from ..engine.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
+from ..phrt_addon.runs import run_files
+from ..engine.runs.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
 
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
@@ -43,13 +45,13 @@ def output_root(output_dir: str) -> Path:
 
 def check_output_root(root: Path):
     """ReplayError unless the folder ``root`` can be created and written (creates nothing)."""
-    problem = runlog.output_dir_problem(root)
+    problem = run_files.output_dir_problem(root)
     if problem is not None:
-        raise replay.ReplayError(problem)
+        raise camera_path.ReplayError(problem)
 
 
 def _path_search(self, context, edit_text):
-    return [camera.name for camera in replay.camera_paths(context.scene) if edit_text.lower() in camera.name.lower()]
+    return [camera.name for camera in camera_path.camera_paths(context.scene) if edit_text.lower() in camera.name.lower()]
 
 
 def _refresh_candidates(context):
@@ -95,18 +97,18 @@ class PHRT_OT_replay_path(bpy.types.Operator):
     def _resolve(self, context):
         """(camera, (start, end), modes in order, output root); ReplayError on bad input."""
         scene = context.scene
-        camera = replay.find_path(scene, self.path or None)
-        start, end = replay.path_frame_range(scene, camera)
+        camera = camera_path.find_path(scene, self.path or None)
+        start, end = camera_path.path_frame_range(scene, camera)
         if self.properties.is_property_set("frame_start"):
             start = self.frame_start
         if self.properties.is_property_set("frame_end"):
             end = self.frame_end
         if end < start:
-            raise replay.ReplayError(f"frame range {start}-{end} ends before it starts: "
+            raise camera_path.ReplayError(f"frame range {start}-{end} ends before it starts: "
                                      f"give frame_end >= frame_start")
         modes = [mode for mode in replay.MODES if mode in self.modes]
         if not modes:
-            raise replay.ReplayError("no mode chosen: pick at least one of raster, hybrid, raytrace")
+            raise camera_path.ReplayError("no mode chosen: pick at least one of raster, hybrid, raytrace")
         root = output_root(self.output_dir)
         check_output_root(root)
         return camera, (start, end), modes, root
@@ -118,7 +120,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
     def execute(self, context):
         try:
             camera, frame_range, modes, root = self._resolve(context)
-        except replay.ReplayError as error:
+        except camera_path.ReplayError as error:
             self.report({"ERROR"}, f"PHRT: {error}")
             return {"CANCELLED"}
         scene, window_manager = context.scene, context.window_manager
@@ -137,7 +139,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                     images=self.images.lower(), scene_label=scene_label(scene), on_progress=progress))
                 if results[-1].signal:  # SIGINT / SIGTERM (blender -b): no further mode
                     break
-        except (replay.ReplayError, RuntimeError) as error:
+        except (camera_path.ReplayError, RuntimeError) as error:
             self.report({"ERROR"}, f"PHRT: replay of '{camera.name}' failed: {error}")
             return {"CANCELLED"}
         finally:
@@ -161,7 +163,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
             return self.execute(context)
         try:
             camera, frame_range, modes, root = self._resolve(context)
-        except replay.ReplayError as error:
+        except camera_path.ReplayError as error:
             self.report({"ERROR"}, f"PHRT: {error}")
             return {"CANCELLED"}
         self._camera, self._frame_range, self._modes, self._root = camera, frame_range, modes, root
@@ -199,7 +201,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                     return self._stop(context, cancelled=False)
         except ReplayInterrupted:  # Esc while a frame was rendering
             return self._stop(context, cancelled=True)
-        except (replay.ReplayError, RuntimeError) as error:
+        except (camera_path.ReplayError, RuntimeError) as error:
             self._run = None  # step() already closed its logs and restored the scene
             self._cleanup(context)
             self.report({"ERROR"}, f"PHRT: replay of '{self._camera.name}' failed: {error}")

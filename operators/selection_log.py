@@ -15,7 +15,9 @@ import bpy
 from bpy.props import StringProperty
 
 from ..engine import session
-from ..phrt_addon import runlog
+from ..phrt_addon.runs import run_log
+from ..phrt_addon import schema
+from ..phrt_addon.runs import run_files
 from ..properties import BLEND_RELATIVE_PATH
 
 FORMATS = (".csv", ".json")
@@ -27,7 +29,7 @@ class SelectionLogError(ValueError):
 
 
 def _columns(rows) -> list:
-    columns = list(runlog.SELECTION_COLUMNS)
+    columns = list(schema.SELECTION_COLUMNS)
     for row in rows:
         columns += [key for key in row if key not in columns]
     return columns
@@ -38,7 +40,7 @@ def _json_value(column, value):
         return bool(value)
     if column in ("element", "reason"):
         return "" if value is None else str(value)
-    return runlog.finite_or_none(value)
+    return run_log.finite_or_none(value)
 
 
 def write_selection_log(rows, filepath) -> Path:
@@ -60,7 +62,7 @@ def write_selection_log(rows, filepath) -> Path:
             with open(path, "w", newline="", encoding="utf-8") as handle:
                 writer = csv.writer(handle, lineterminator="\n")
                 writer.writerow(columns)
-                writer.writerows([runlog.format_value(row.get(column)) for column in columns] for row in rows)
+                writer.writerows([run_log.format_value(row.get(column)) for column in columns] for row in rows)
         else:
             data = [{column: _json_value(column, row.get(column)) for column in columns} for row in rows]
             path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
@@ -74,10 +76,10 @@ def rows_to_export(run_dir: str = "") -> list:
     if not run_dir:
         return list(session.last_frame().rows)
     folder = Path(bpy.path.abspath(run_dir))
-    if not (folder / runlog.SELECTION_CSV).is_file():
-        raise SelectionLogError(f"'{run_dir}' is not a run folder (no {runlog.SELECTION_CSV}): give a folder "
+    if not (folder / schema.SELECTION_CSV).is_file():
+        raise SelectionLogError(f"'{run_dir}' is not a run folder (no {schema.SELECTION_CSV}): give a folder "
                                 f"written by phrt.replay_path or 'phrt render'")
-    return runlog.read_selection(folder)
+    return run_files.read_selection(folder)
 
 
 class PHRT_OT_export_selection_log(bpy.types.Operator):

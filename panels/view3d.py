@@ -16,7 +16,8 @@ import textwrap
 
 import bpy
 
-from ..engine import candidate_list, replay, session, viewport
+from ..engine import candidate_list, session, viewport
+from ..engine.runs import camera_path
 from ..operators import advisor
 from . import candidates
 
@@ -157,7 +158,7 @@ class PHRT_PT_replay(PHRT_Panel, bpy.types.Panel):
         column.prop(settings, "camera")
         camera = settings.camera
         if camera is None:
-            paths = replay.camera_paths(scene)
+            paths = camera_path.camera_paths(scene)
             camera = paths[0] if paths else None
             column.label(text=f"Path: {camera.name}" if camera else "The scene has no camera",
                          icon="CAMERA_DATA" if camera else "ERROR")
@@ -165,7 +166,7 @@ class PHRT_PT_replay(PHRT_Panel, bpy.types.Panel):
         frames = column.column(align=True)
         if settings.use_path_range:
             if camera is not None:
-                start, end = replay.path_frame_range(scene, camera)
+                start, end = camera_path.path_frame_range(scene, camera)
                 frames.label(text=f"Frames {start}-{end}")
         else:
             frames.prop(settings, "frame_start")

@@ -31,18 +31,17 @@ import time
 
 import numpy as np
 
-from . import benefit, heuristic, shading
-from .cost_model import CostModel, FrameStats
-from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame, TracedTerms
-from .gbuffer import element_pixel_stats
+from .select import benefit, heuristic
+from .select import selection_terms
+from .scene import shading
+from .select.cost_model import CostModel, FrameStats
+from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
+from .raster.gbuffer import element_pixel_stats
 from .problems import ProblemLog
-from .scene import SceneSnapshot
-from .shadow_region import ElementBounds, ShadowRegionIndex
-from .trace_stage import TraceResult, TraceStage
+from .scene.snapshot import SceneSnapshot
+from .trace.shadow_region import ElementBounds, ShadowRegionIndex
+from .trace.stage import TraceResult, TraceStage
 
-# The frame's data types (frame_types.py) are part of this module's interface.
-__all__ = ["FOOTPRINT_STEP", "FramePasses", "FrameRenderer", "FrameResult", "LayerPixels", "RasterFrame",
-           "TracedTerms"]
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
 FOOTPRINT_STEP = 8
@@ -66,7 +65,7 @@ class FrameRenderer:
         self.trace_stage = TraceStage(threads)
         self.frames_rendered = 0
         self.element_bounds = ElementBounds()
-        # The error-aware relevance's per-element estimates (phrt_addon/benefit.py).
+        # The error-aware relevance's per-element estimates (phrt_addon/select/benefit.py).
         self.benefit_model = benefit.BenefitModel()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None
@@ -123,7 +122,7 @@ class FrameRenderer:
             [e.name for e in snapshot.elements],
             benefit.prior_per_pixel(layers, n_elements, flags["reflections"], flags["refractions"],
                                     flags["shadows"], materials)) if learn_benefit else None
-        frame_elements = heuristic.FrameElements(
+        frame_elements = selection_terms.FrameElements(
             names=[e.name for e in snapshot.elements],
             candidate=candidate,
             area_px=area_px, centre_ndc=centre_ndc, distance=distance,
@@ -137,7 +136,7 @@ class FrameRenderer:
         )
         selection = heuristic.select(
             frame_elements, self.previous_selection,
-            heuristic.SelectionSettings(budget_ms=settings.budget_ms, selection_weight=settings.selection_weight,
+            selection_terms.SelectionSettings(budget_ms=settings.budget_ms, selection_weight=settings.selection_weight,
                                         max_area_fraction=settings.max_area_fraction, mode=mode,
                                         cost_mode=settings.cost_mode, relevance=settings.relevance,
                                         order=settings.selection_order, budget_at=settings.budget_at),
@@ -235,7 +234,7 @@ class FrameRenderer:
         return FramePasses(
             combined=combined,
             depth=depth,
-            normal=_finite(np.asarray(raster.front_normal, np.float32)),
+            normal=clamp_finite(np.asarray(raster.front_normal, np.float32)),
             selected=selected_flags[index],
             candidate=candidate_flags[index],
             element=element,
@@ -294,7 +293,7 @@ def front_points(camera, view_depth, step) -> np.ndarray:
     return points[np.all(np.isfinite(points), axis=1)]
 
 
-def _finite(array: np.ndarray) -> np.ndarray:
+def clamp_finite(array: np.ndarray) -> np.ndarray:
     """``array`` itself when every value is finite (one reduction), else a finite copy."""
     return array if np.isfinite(array).all() else np.nan_to_num(array)
 

@@ -14,8 +14,8 @@ from typing import Protocol
 
 import numpy as np
 
-from . import shading
-from .gbuffer import GBuffer, geometric_normals
+from .scene import shading
+from .raster.gbuffer import GBuffer, geometric_normals
 
 
 class RasterFrame(Protocol):

@@ -72,7 +72,7 @@ FRAME_COLUMNS = (
     "composite_ms", "budget_ms", "predicted_trace_ms", "n_candidates",
     "n_visible", "n_selected", "rays",
 )
-# Written after FRAME_COLUMNS by a replay (engine/replay.py).
+# Written after FRAME_COLUMNS by a replay (engine/runs/replay.py).
 EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
                        "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
 STAGE_COLUMNS = ("raster_ms", "select_ms", "trace_ms", "composite_ms")

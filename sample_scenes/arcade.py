@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from . import geometry as geo
+from . import transforms
 from . import textures
 from .blender_data import SceneData, packed_image, tag
 from .camera_paths import RUN_MPS, WALK_MPS, Look, PathSpec
@@ -64,7 +65,7 @@ def _column(storey: dict, x: float, y: float) -> list:
     shaft_bottom = base + storey["plinth_h"]
     parts = [geo.box((-half_plinth, -half_plinth, base), (half_plinth, half_plinth, shaft_bottom))]
     parts.append(geo.torus(radius * 1.1, radius * 0.2, 48, 12).transformed(
-        geo.translation(0.0, 0.0, shaft_bottom + radius * 0.15)))
+        transforms.translation(0.0, 0.0, shaft_bottom + radius * 0.15)))
     z = np.linspace(shaft_bottom, storey["shaft_top"], 9)
     taper = 1.0 - 0.12 * ((z - shaft_bottom) / (storey["shaft_top"] - shaft_bottom)) ** 1.5
     parts.append(geo.revolve(radius * taper, z, 40))
@@ -76,7 +77,7 @@ def _column(storey: dict, x: float, y: float) -> list:
     half_abacus = storey["abacus"] / 2
     parts.append(geo.box((-half_abacus, -half_abacus, storey["capital_top"]),
                          (half_abacus, half_abacus, storey["spring"])))
-    move = geo.translation(x, y, 0.0)
+    move = transforms.translation(x, y, 0.0)
     return [p.transformed(move) for p in parts]
 
 
@@ -89,15 +90,15 @@ def _arcade_bands(storey: dict, material: int) -> list:
         for a, b in zip(xs[:-1], xs[1:]):
             band = geo.arch_band(a, b, depth, storey["spring"], storey["band_top"],
                                  (b - a - depth) / 2, 24, material)
-            parts.append(band.transformed(geo.translation(0.0, side * LINE_Y, 0.0)))
+            parts.append(band.transformed(transforms.translation(0.0, side * LINE_Y, 0.0)))
     ys = (-LINE_Y,) + END_YS + (LINE_Y,)
     for side in (-1, 1):
         for a, b in zip(ys[:-1], ys[1:]):
             band = geo.arch_band(a, b, depth, storey["spring"], storey["band_top"],
                                  (b - a - depth) / 2, 24, material)
             # band runs along +X; turn it to run along +Y at x = side * LINE_X
-            parts.append(band.transformed(geo.compose(geo.translation(side * LINE_X, 0.0, 0.0),
-                                                      geo.rotation_z(math.pi / 2))))
+            parts.append(band.transformed(transforms.compose(transforms.translation(side * LINE_X, 0.0, 0.0),
+                                                      transforms.rotation_z(math.pi / 2))))
     half = depth / 2
     for sx in (-1, 1):
         for sy in (-1, 1):
@@ -167,7 +168,7 @@ def _vitrine() -> geo.MeshData:
     data.add(*(g.with_material(1) for g in glass))
     goblet = geo.revolve((0.09, 0.09, 0.018, 0.018, 0.06, 0.085, 0.09),
                          (0.0, 0.012, 0.035, 0.16, 0.19, 0.27, 0.36), 32, cap_bottom=0.0, cap_top=0.34)
-    data.add(goblet.transformed(geo.translation(0.0, 0.0, stand)).with_material(2))
+    data.add(goblet.transformed(transforms.translation(0.0, 0.0, stand)).with_material(2))
     return data
 
 
@@ -201,15 +202,15 @@ VITRINES = (("Vitrine_North", (-4.5, HALL_Y - 0.65), 0.0), ("Vitrine_South", (4.
 def _candidate_part(kind: str, size: float) -> geo.Part:
     """The primitive resting on the floor, centred on x = y = 0."""
     if kind == "sphere":
-        return geo.uv_sphere(size, 64, 32).transformed(geo.translation(0.0, 0.0, size))
+        return geo.uv_sphere(size, 64, 32).transformed(transforms.translation(0.0, 0.0, size))
     if kind == "torus":
         ring = geo.torus(size, 0.22, 96, 40)
-        return ring.transformed(geo.compose(geo.translation(0.0, 0.0, size + 0.22), geo.rotation_x(math.pi / 2)))
+        return ring.transformed(transforms.compose(transforms.translation(0.0, 0.0, size + 0.22), transforms.rotation_x(math.pi / 2)))
     if kind == "cube":
         half = size / 2
         return geo.box((-half, -half, 0.0), (half, half, size))
     if kind == "octahedron":
-        return geo.octahedron(size).transformed(geo.translation(0.0, 0.0, size))
+        return geo.octahedron(size).transformed(transforms.translation(0.0, 0.0, size))
     raise ValueError(kind)
 
 
@@ -260,8 +261,8 @@ def build(data: SceneData, rng: np.random.Generator) -> None:
     for index, x in enumerate((-6.0, 0.0, 6.0)):
         for side in (-1, 1):
             cloth = _banner(1.3, 3.2, rng)
-            facing = geo.rotation_z(0.0 if side > 0 else math.pi)
-            move = geo.compose(geo.translation(x, side * (LINE_Y - 0.55), rail_top + 0.05), facing)
+            facing = transforms.rotation_z(0.0 if side > 0 else math.pi)
+            move = transforms.compose(transforms.translation(x, side * (LINE_Y - 0.55), rail_top + 0.05), facing)
             name = f"Banner_{'N' if side > 0 else 'S'}{index + 1}"
             data.mesh_object(name, geo.MeshData().add(cloth.transformed(move)),
                              [banners[(index + (side > 0)) % 3]])

@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from . import geometry as geo
+from . import transforms
 from . import textures
 from .blender_data import SceneData, packed_image, tag
 from .camera_paths import RUN_MPS, WALK_MPS, Look, PathSpec
@@ -113,8 +114,8 @@ def _tree(rng: np.random.Generator, trunk_height: float, trunk_radius: float, cr
 
 def _ellipsoid(radii, centre, tilt_deg=(0.0, 0.0, 0.0), segments=28, rings=14) -> geo.Part:
     rx, ry, rz = (math.radians(a) for a in tilt_deg)
-    return geo.ellipsoid(radii, segments, rings).transformed(geo.compose(
-        geo.translation(*centre), geo.rotation_z(rz), geo.rotation_y(ry), geo.rotation_x(rx)))
+    return geo.ellipsoid(radii, segments, rings).transformed(transforms.compose(
+        transforms.translation(*centre), transforms.rotation_z(rz), transforms.rotation_y(ry), transforms.rotation_x(rx)))
 
 
 def _standing_figure() -> geo.MeshData:
@@ -162,10 +163,10 @@ def _abstract_sculpture() -> geo.MeshData:
     parts = []
     z = 0.0
     for radius in (0.5, 0.4, 0.31, 0.23, 0.16):
-        parts.append(geo.uv_sphere(radius, 40, 20).transformed(geo.translation(0.0, 0.0, z + radius * 0.9)))
+        parts.append(geo.uv_sphere(radius, 40, 20).transformed(transforms.translation(0.0, 0.0, z + radius * 0.9)))
         z += radius * 1.75
-    parts.append(geo.torus(0.75, 0.07, 64, 16).transformed(geo.compose(
-        geo.translation(0.0, 0.0, 1.2), geo.rotation_y(math.radians(30)))))
+    parts.append(geo.torus(0.75, 0.07, 64, 16).transformed(transforms.compose(
+        transforms.translation(0.0, 0.0, 1.2), transforms.rotation_y(math.radians(30)))))
     return geo.MeshData().add(*parts)
 
 
@@ -191,9 +192,9 @@ def _rotunda() -> geo.MeshData:
         x, y = 3.0 * math.cos(angle), 3.0 * math.sin(angle)
         z = np.linspace(0.35, 3.2, 6)
         data.add(geo.revolve(0.2 * (1.0 - 0.1 * (z - 0.35) / 2.85), z, 24, cap_bottom=0.35).transformed(
-            geo.translation(x, y, 0.0)))
+            transforms.translation(x, y, 0.0)))
         data.add(geo.revolve((0.18, 0.22, 0.27, 0.28), (3.2, 3.28, 3.36, 3.4), 24, cap_top=3.4).transformed(
-            geo.translation(x, y, 0.0)))
+            transforms.translation(x, y, 0.0)))
     data.add(geo.ring_sector(2.6, 3.5, 3.4, 3.9, 0.0, 2 * math.pi, 64))
     theta = np.linspace(0.0, math.pi / 2, 17)[:-1]
     data.add(geo.revolve(3.5 * np.cos(theta), 3.9 + 3.0 * np.sin(theta), 64, cap_bottom=3.9, cap_top=6.9))
@@ -286,9 +287,9 @@ def build(data: SceneData, rng: np.random.Generator) -> None:
 
     spheres = geo.MeshData()
     for x, y in STONE_SPHERES:
-        spheres.add(geo.uv_sphere(0.6, 48, 24).transformed(geo.translation(x, y, 1.3)))
+        spheres.add(geo.uv_sphere(0.6, 48, 24).transformed(transforms.translation(x, y, 1.3)))
     data.mesh_object("StoneSpheres", spheres, [stone])
-    urns = geo.MeshData().add(*(_urn().transformed(geo.translation(x, y, 0.0)) for x, y in URNS))
+    urns = geo.MeshData().add(*(_urn().transformed(transforms.translation(x, y, 0.0)) for x, y in URNS))
     data.mesh_object("Urns", urns, [terracotta])
     data.mesh_object("Rotunda", _rotunda(), [marble], location=ROTUNDA + (0.0,))
     data.mesh_object("Exedra", _exedra(), [stone], location=EXEDRA + (0.0,))

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .transforms import scale
+
 _NO_TRIS = np.zeros((0, 3), dtype=np.int32)
 _NO_QUADS = np.zeros((0, 4), dtype=np.int32)
 
@@ -90,48 +92,6 @@ class MeshData:
 
 # --------------------------------------------------------------------------
 # Transforms
-
-def translation(x: float, y: float, z: float) -> np.ndarray:
-    matrix = np.eye(4)
-    matrix[:3, 3] = (x, y, z)
-    return matrix
-
-
-def rotation_z(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    matrix = np.eye(4)
-    matrix[:2, :2] = ((c, -s), (s, c))
-    return matrix
-
-
-def rotation_x(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    matrix = np.eye(4)
-    matrix[1:3, 1:3] = ((c, -s), (s, c))
-    return matrix
-
-
-def rotation_y(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    matrix = np.eye(4)
-    matrix[0, 0], matrix[0, 2], matrix[2, 0], matrix[2, 2] = c, s, -s, c
-    return matrix
-
-
-def scale(x: float, y: float, z: float) -> np.ndarray:
-    return np.diag((x, y, z, 1.0))
-
-
-def compose(*matrices: np.ndarray) -> np.ndarray:
-    """compose(A, B, C) applies C first, then B, then A."""
-    result = np.eye(4)
-    for matrix in matrices:
-        result = result @ matrix
-    return result
-
-
-# --------------------------------------------------------------------------
-# Orientation checks (used by the tests and by the convex primitives)
 
 def _fans(part: Part) -> np.ndarray:
     """Every face as triangles (a, b, c), fanned from its first corner."""

@@ -1,11 +1,14 @@
-"""Structure checks of the add-on (issue 12), run by ``tests/core/test_structure.py``:
+"""Structure checks of the whole project (issues 12 and 19), run by ``tests/core/test_structure.py``:
 
     python tools/check_structure.py            # prints the findings, exit 1 if any
 
 - the import graph of the package (every ``import``/``from`` statement, at module level
   or inside functions, relative imports resolved) has no cycle;
-- no module of ``phrt_addon/`` is longer than ``MAX_LINES``;
-- ``phrt_addon/`` imports no ``bpy`` (nor ``gpu``/``mathutils``);
+- no cycle between the top-level packages either (``phrt_addon``, ``engine``, ``operators``,
+  ``panels``, ``cli``, ``sample_scenes``, ``benchmarks`` and the root modules);
+- no module of any package is longer than ``MAX_LINES``;
+- ``phrt_addon/`` imports no ``bpy`` (nor ``gpu``/``mathutils``), also not through
+  ``importlib.import_module("bpy")`` / ``__import__``;
 - no module of the add-on assigns a mutable object (dict, list, set, call of a class...)
   to a module-level name outside ``engine/session.py``, except declared constants.
 
@@ -19,14 +22,14 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = "phrt"
-SKIP_DIRS = {"tests", "tools", ".venv", "out", "dist", "build", "wheels", "sample_scenes", "benchmarks"}
+SKIP_DIRS = {"tests", "tools", ".venv", "out", "dist", "build", "wheels"}
 MAX_LINES = 400
 BLENDER_MODULES = {"bpy", "gpu", "mathutils", "gpu_extras", "bmesh"}
 # Module-level state the session does not own, on purpose (file: names).
 ALLOWED_STATE = {
     "engine/session.py": {"_SESSION"},
     "__init__.py": {"_registered"},  # the add-on's own registration flag (register()/unregister() of Blender)
-    "engine/sweep.py": {"_WARM"},  # issue 13's file: processes that rendered their warm-up frame
+    "cli/sweep.py": {"_WARM"},  # issue 13's file: processes that rendered their warm-up frame
 }
 
 
@@ -119,10 +122,36 @@ def import_graph(root: Path = ROOT):
     return {name: imports(name, path, known) for name, path in known.items()}
 
 
-def oversized(root: Path = ROOT, limit: int = MAX_LINES):
-    core = root / "phrt_addon"
-    return sorted((str(path.relative_to(root)), count) for path in core.rglob("*.py")
-                  if (count := len(path.read_text().splitlines())) > limit)
+# Modules still over the limit, each with the issue that removes it (empty when none).
+OVERSIZED_UNTIL_SPLIT = {
+    "engine/raster.py": "issue 19: the GPU frame split by pass (engine/gpu/)",
+    "engine/shaders.py": "issue 19: the GLSL beside its pass (engine/gpu/)",
+}
+
+
+def oversized(root: Path = ROOT, limit: int = MAX_LINES, allowed=None):
+    """(file, lines) of every module of every package of the project over ``limit`` lines."""
+    allowed = OVERSIZED_UNTIL_SPLIT if allowed is None else allowed
+    return sorted((relative, count) for path in modules(root).values()
+                  if (relative := str(path.relative_to(root))) not in allowed
+                  and (count := len(path.read_text().splitlines())) > limit)
+
+
+def top_level(name: str) -> str:
+    """The top-level package (or root module) a module belongs to: ``phrt.engine.runs.replay`` ->
+    ``phrt.engine``; the extension's own ``__init__`` is ``phrt``."""
+    parts = name.split(".")
+    return ".".join(parts[:2])
+
+
+def package_cycles(graph) -> list:
+    """Cycles between top-level packages (imports inside functions count too)."""
+    packages = {}
+    for name, targets in graph.items():
+        source = top_level(name)
+        packages.setdefault(source, set()).update(
+            top_level(t) for t in targets if top_level(t) != source and top_level(t) != "phrt")
+    return cycles(packages)
 
 
 def blender_imports_in_core(root: Path = ROOT):
@@ -131,12 +160,17 @@ def blender_imports_in_core(root: Path = ROOT):
         for node in ast.walk(ast.parse(path.read_text())):
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+            if isinstance(node, ast.Call) and _call_name(node) in ("importlib.import_module", "import_module",
+                                                                   "__import__") \
+                    and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
+                names = [node.args[0].value]
             found += [(str(path.relative_to(root)), n) for n in names if n.split(".")[0] in BLENDER_MODULES]
     return found
 
 
 _MUTABLE_CALL_EXCEPTIONS = {"frozenset", "tuple", "re.compile", "Path", "np.array", "np.zeros", "np.finfo",
-                            "float", "int", "str", "dict", "logging.getLogger", "TypeVar", "max", "min"}
+                            "float", "int", "str", "dict", "logging.getLogger", "TypeVar", "max", "min",
+                            "math.radians", "np.radians"}
 
 
 def _call_name(node) -> str:
@@ -204,6 +238,9 @@ def main() -> int:
     for component in cycles(graph):
         problems += 1
         print("import cycle:", " <-> ".join(component))
+    for component in package_cycles(graph):
+        problems += 1
+        print("import cycle between packages:", " <-> ".join(component))
     for path, count in oversized():
         problems += 1
         print(f"over {MAX_LINES} lines: {path} ({count})")

@@ -27,8 +27,11 @@ def main(argv=None):
     parser.add_argument("--budget-ms", type=float, default=None)
     parser.add_argument("--resolution", default="640x480")
     args = parser.parse_args(argv)
-    from phrt import bench, cli
-    from phrt.engine import raster, replay
+    from phrt.cli import bench
+    from phrt import cli
+    from phrt.engine import raster
+    from phrt.engine.runs import replay
+    from phrt.engine.runs import camera_path
     timings = {}
 
     def timed(name, function):
@@ -49,8 +52,8 @@ def main(argv=None):
     scene = bpy.context.scene
     width, height = (int(v) for v in args.resolution.lower().split("x"))
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
-    camera = replay.find_path(scene, None)
-    frames = replay.parse_frames(args.frames, replay.path_frame_range(scene, camera))
+    camera = camera_path.find_path(scene, None)
+    frames = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
     with tempfile.TemporaryDirectory() as temp:
         with cli._quiet_stdout():
             result = replay.replay(scene, camera, frames, args.mode.upper(), Path(temp) / "run", images="none",

@@ -76,20 +76,20 @@ class ResourceCounter:
     def install(self):
         import gpu
 
-        from phrt.phrt_addon import trace_scene
+        from phrt.phrt_addon.trace import embree_scene
         for name in self.GPU_TYPES:
             self._wrap(gpu.types, name, name)
         self._wrap(gpu.shader, "create_from_info", "GPUShader")
         # Embree scenes: embreex checks their type, so the tracer's owner of each is wrapped instead.
-        original_init = trace_scene._EmbreeSet.__init__
+        original_init = embree_scene._EmbreeSet.__init__
 
         def init(embree_set, *args, **kwargs):
             original_init(embree_set, *args, **kwargs)
             self.created["EmbreeScene"] = self.created.get("EmbreeScene", 0) + 1
             self._live.append(("EmbreeScene", embree_set.scene))
 
-        trace_scene._EmbreeSet.__init__ = init
-        self._restore.append((trace_scene._EmbreeSet, "__init__", original_init))
+        embree_scene._EmbreeSet.__init__ = init
+        self._restore.append((embree_scene._EmbreeSet, "__init__", original_init))
         return self
 
     def uninstall(self):
@@ -130,12 +130,14 @@ def long_replay(args, counter, out):
     import bpy
 
     from phrt import cli
-    from phrt.engine import final, replay
+    from phrt.engine import final
+    from phrt.engine.runs import replay
+    from phrt.engine.runs import camera_path
 
     label = cli.load_scene(args.scene)
     scene = bpy.context.scene
-    camera = replay.find_path(scene, args.path)
-    start, end = replay.path_frame_range(scene, camera)
+    camera = camera_path.find_path(scene, args.path)
+    start, end = camera_path.path_frame_range(scene, camera)
     frames = (start, start + args.frames - 1)
     samples = []
     started = time.perf_counter()
@@ -214,7 +216,9 @@ def big_mesh_scene(triangles, resolution):
 
 def big_mesh(args, counter, out):
     from phrt import cli
-    from phrt.engine import final, replay
+    from phrt.engine import final
+    from phrt.engine.runs import replay
+    from phrt.engine.runs import camera_path
 
     started = time.perf_counter()
     scene, triangles = big_mesh_scene(args.triangles, args.resolution)
@@ -226,11 +230,11 @@ def big_mesh(args, counter, out):
             with cli._quiet_stdout():
                 replay.replay(scene, scene.camera, (1, 2), mode, out / f"big-{mode.lower()}", images="exr",
                               budget_ms=1e9 if mode != "RASTER" else None, scene_label="big")
-        except replay.ReplayError as error:
+        except camera_path.ReplayError as error:
             runs[mode] = {"refused": str(error)}
             continue
-        from phrt.phrt_addon import runlog
-        rows = runlog.read_frames(out / f"big-{mode.lower()}")
+        from phrt.phrt_addon.runs import run_files
+        rows = run_files.read_frames(out / f"big-{mode.lower()}")
         runs[mode] = {
             "wall_s": time.perf_counter() - begin,
             "frames": [{key: row.get(key) for key in ("total_ms", "raster_ms", "trace_ms", "composite_ms",

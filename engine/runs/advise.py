@@ -26,11 +26,14 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ...phrt_addon import budget, metrics, oracle, runlog
+from ...phrt_addon.report import metrics, oracle
+from ...phrt_addon.runs import run_files
+from ...phrt_addon.select import mode_budgets
 from ...phrt_addon.advise import charts, export, files, items, recommend
 from ...phrt_addon.schema import EFFECTS
-from .. import extract, item_measure, replay
-from .. import oracle as oracle_engine
+from .. import extract
+from . import item_measure, replay
+from . import oracle as oracle_engine
 
 DEFAULT_BUDGET_AT = (0.25, 0.5, 0.75)
 DEFAULT_EVERY = 4
@@ -150,8 +153,8 @@ def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGE
                            resolution=resolution, label=label):
         yield tick("raster replay")
     elements = _elements(scene, camera)
-    width, height = runlog.read_summary(work / "raster")["resolution"]
-    chosen_prospects, left_out = _prospects(runlog.read_selection(work / "raster"), elements, width * height,
+    width, height = run_files.read_summary(work / "raster")["resolution"]
+    chosen_prospects, left_out = _prospects(run_files.read_selection(work / "raster"), elements, width * height,
                                             prospects_cap)
     prospect_effects = {prospect.element: prospect.effects for prospect in chosen_prospects}
     # The designer's ray traced frame time (for the budgets), then the reference: the same frames
@@ -163,14 +166,14 @@ def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGE
         for _ in _replay_steps(scene, camera, frame_range, "RAYTRACE", work / "reference", images="exr",
                                resolution=resolution, label=label, frame_list=judged):
             yield tick("ray traced reference")
-    resolved = {fraction: budget.from_runs(fraction, work / "raster", work / "raytrace") for fraction in fractions}
+    resolved = {fraction: mode_budgets.from_runs(fraction, work / "raster", work / "raytrace") for fraction in fractions}
     budgets_ms = {fraction: resolved[fraction].budget_ms for fraction in fractions}
-    ends = budget.from_runs(0.0, work / "raster", work / "raytrace")
+    ends = mode_budgets.from_runs(0.0, work / "raster", work / "raytrace")
     for milliseconds in budget_ms:
         span = ends.raytrace_ms - ends.raster_ms
         budgets_ms[(float(milliseconds) - ends.raster_ms) / span if span > 0 else 1.0] = float(milliseconds)
     fractions = sorted(budgets_ms)
-    shared = _shared_ms(runlog.read_frames(work / "raster"))
+    shared = _shared_ms(run_files.read_frames(work / "raster"))
     effects_of = {name: tuple(effect for effect in EFFECTS if getattr(element, effect))
                   for name, (element, _) in elements.items() if element.is_candidate}
     effects_of.update(prospect_effects)
@@ -187,7 +190,7 @@ def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGE
                                    resolution=resolution, label=label, budget_ms=budgets_ms[fraction],
                                    overrides=overrides):
                 yield tick(f"{name} replay at {fraction:g}")
-            selections.setdefault(name, {})[fraction] = items.selection_shares(runlog.read_selection(run_dir),
+            selections.setdefault(name, {})[fraction] = items.selection_shares(run_files.read_selection(run_dir),
                                                                                keys_of_element)
     measured, best = [], {}
     maps_dir = out / files.MAPS_DIR
@@ -195,7 +198,7 @@ def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGE
     with oracle_engine.ForcedRenderer(scene, camera, resolution) as renderer, \
             item_measure.ItemScope(prospect_effects) as scope:
         for count, frame in enumerate(judged):
-            reference_path = runlog.frame_image_path(work / "reference", frame)
+            reference_path = run_files.frame_image_path(work / "reference", frame)
             if reference_path is None:
                 continue
             reference = metrics.read_image(reference_path)

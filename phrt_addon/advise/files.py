@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import runlog
+from ..runs import run_log
 from . import charts, recommend
 
 COLUMNS = ("element", "effect", "tagged", "visible_share", "mean_pixels", "benefit", "cost_ms", "benefit_per_ms",
@@ -88,7 +88,7 @@ def write_csv(path, rows, budgets):
         writer.writerow(columns)
         for row in rows:
             writer.writerow(["1" if row[column] is True else "0" if row[column] is False
-                             else runlog.format_value(row.get(column)) for column in columns])
+                             else run_log.format_value(row.get(column)) for column in columns])
     os.replace(temporary, path)
 
 

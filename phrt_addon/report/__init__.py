@@ -24,9 +24,9 @@
 - ``regret.csv`` and ``candidates.csv``: copies of the oracle's per-frame files.
 
 With a sweep (``phrt sweep``), or whenever the runs' folder holds an oracle
-folder computed from them (``phrt_addon/oracle.py``), the report adds the
+folder computed from them (``phrt_addon/report/oracle.py``), the report adds the
 heuristic's regret against the oracle selection; popping
-(``phrt_addon/popping.py``) is measured for every run with EXR images.  Table
+(``phrt_addon/report/popping.py``) is measured for every run with EXR images.  Table
 II is laid out like the paper's, with our ratios beside the paper's own
 (milliseconds on different machines do not compare, ratios may).
 

@@ -2,12 +2,12 @@
 """
 from pathlib import Path
 
-from .. import oracle
-from .document import _Table, _sections
-from .markup import _html, _markdown
-from .plots import _plot_error_vs_time, _plot_selection_quality, _plot_timeline
-from .runs import ReportFiles, _measure_group, _references, _unique_labels, _write_errors_csv, load_run
-from .selection import _measure_popping, _oracle_results, _regrets, _write_sweep, sweep_rows
+from . import oracle
+from .document import ReportTable, report_sections
+from .markup import to_html, to_markdown
+from .plots import plot_error_vs_time, plot_selection_quality, plot_timeline
+from .runs import ReportFiles, measure_group, find_references, unique_labels, write_errors_csv, load_run
+from .selection import measure_run_popping, load_oracle_results, run_regrets, write_sweep, sweep_rows
 
 
 def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None, failures=()):
@@ -15,7 +15,7 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
 
     ``reference`` is a RUN_DIR (added to the runs if it is not among them);
     by default each path's raytrace run.  ``oracle_dir`` is an oracle folder
-    (``phrt_addon/oracle.py``); by default the ``oracle`` folder beside the runs,
+    (``phrt_addon/report/oracle.py``); by default the ``oracle`` folder beside the runs,
     when they share one parent folder.  ``failures`` are (job, one-line message)
     pairs of a plan's jobs that failed, listed first.  Raises ``ValueError`` with
     a message for the user when a RUN_DIR is unusable or there is no reference at all.
@@ -27,22 +27,22 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
     if not paths:
         raise ValueError("no RUN_DIR given")
     runs = [load_run(path) for path in paths]
-    _unique_labels(runs)
+    unique_labels(runs)
     reference_run = None
     if reference is not None:
         reference_run = next(run for run in runs if run.run_dir.resolve() == Path(reference).resolve())
     groups = {}
     for run in runs:
         groups.setdefault(run.group, []).append(run)
-    references = _references(groups, reference_run)
+    references = find_references(groups, reference_run)
 
     errors = {}
     for group, members in groups.items():
-        errors.update(_measure_group(members, references[group]))
+        errors.update(measure_group(members, references[group]))
 
-    pops = _measure_popping(runs, references)
-    oracle_results = _oracle_results(runs, oracle_dir)
-    regrets = _regrets(runs, oracle_results)
+    pops = measure_run_popping(runs, references)
+    oracle_results = load_oracle_results(runs, oracle_dir)
+    regrets = run_regrets(runs, oracle_results)
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -52,13 +52,13 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
                         timeline_png=out_dir / "timeline.png",
                         sweep_csv=out_dir / "sweep.csv", sweep_json=out_dir / "sweep.json")
     rows = sweep_rows(runs, errors, regrets, pops, references)
-    _write_errors_csv(files.errors_csv, runs, errors)
-    _write_sweep(files.sweep_csv, files.sweep_json, rows, oracle_results)
-    files.figures[files.error_vs_time_png.name] = _plot_error_vs_time(files.error_vs_time_png, groups, errors)
-    files.figures[files.timeline_png.name] = _plot_timeline(files.timeline_png, groups)
+    write_errors_csv(files.errors_csv, runs, errors)
+    write_sweep(files.sweep_csv, files.sweep_json, rows, oracle_results)
+    files.figures[files.error_vs_time_png.name] = plot_error_vs_time(files.error_vs_time_png, groups, errors)
+    files.figures[files.timeline_png.name] = plot_timeline(files.timeline_png, groups)
     if any(run.mode == "HYBRID" for run in runs):
         files.selection_quality_png = out_dir / "selection_quality.png"
-        files.figures[files.selection_quality_png.name] = _plot_selection_quality(
+        files.figures[files.selection_quality_png.name] = plot_selection_quality(
             files.selection_quality_png, groups, regrets, pops)
     if oracle_results is not None:
         oracle.write_csv(out_dir / oracle.REGRET_CSV, oracle.REGRET_COLUMNS,
@@ -67,13 +67,13 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
                           for row in oracle_results.regret_rows])
         oracle.write_csv(out_dir / oracle.CANDIDATES_CSV, ("sweep",) + oracle.CANDIDATE_COLUMNS,
                          oracle_results.candidate_rows)
-    sections = _sections(runs, groups, references, errors, files, rows=rows, regrets=regrets, pops=pops,
+    sections = report_sections(runs, groups, references, errors, files, rows=rows, regrets=regrets, pops=pops,
                          oracle_results=oracle_results)
     if failures:
-        sections[2:2] = [("table", _Table(
+        sections[2:2] = [("table", ReportTable(
             "Failed jobs", ["Job", "Why"], [[job, message] for job, message in failures],
             "Jobs of the plan that ended without a result (after their retries); the report covers the "
             "others. Running the plan again retries them."))]
-    files.markdown.write_text(_markdown(sections), encoding="utf-8")
-    files.html.write_text(_html(sections), encoding="utf-8")
+    files.markdown.write_text(to_markdown(sections), encoding="utf-8")
+    files.html.write_text(to_html(sections), encoding="utf-8")
     return files

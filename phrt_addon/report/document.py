@@ -5,7 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import defaults, metrics, oracle, runlog
+from .. import defaults
+from . import metrics, oracle
+from ..runs import run_log
 from .runs import BASELINE_VARIANT, PAPER_SCENES, PAPER_TABLE_II, WORST_ELEMENTS
 from .selection import RunRegret, variant_label
 
@@ -19,7 +21,7 @@ def _number(value, spec):
 
 
 @dataclass
-class _Table:
+class ReportTable:
     title: str
     header: list
     rows: list
@@ -62,8 +64,8 @@ def table_ii_rows(groups):
     return rows
 
 
-def _sections(runs, groups, references, errors, files, rows=None, regrets=None, pops=None, oracle_results=None):
-    """The report as a list of items: ('h', text), ('p', text), ('table', _Table), ('img', file)."""
+def report_sections(runs, groups, references, errors, files, rows=None, regrets=None, pops=None, oracle_results=None):
+    """The report as a list of items: ('h', text), ('p', text), ('table', ReportTable), ('img', file)."""
     rows = rows or []
     regrets = regrets or {}
     pops = pops or {}
@@ -71,7 +73,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
     items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are "
                        f"means over the frames of each run, in milliseconds."))
 
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Render times (ms per frame), after the paper's Table II",
         ["Scene", "Path", "Raster rendering", "Hybrid rendering", "Ray tracing rendering", "Hybrid / raster",
          "Paper: hybrid / raster", "Ray tracing / hybrid", "Paper: ray tracing / hybrid", "Hybrid run"],
@@ -96,7 +98,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             _ms(float(total.max()) if total.size else None),
             _ms(run.mean("raster_ms")), _ms(run.mean("select_ms")), _ms(run.mean("trace_ms")),
             _ms(run.mean("composite_ms")), _number(run.mean("n_selected"), ".1f"), within])
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Runs",
         ["Run", "Scene / path", "Mode", "Budget ms", "Frames", "Mean ms", "p50 ms", "p95 ms",
          "Max ms", "Raster ms", "Select ms", "Trace ms", "Composite ms", "Mean selected",
@@ -114,7 +116,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             str(len(outcome.per_frame)) if run is not reference else str(len(run.frames)),
             _number(outcome.mean("flip"), ".4f"), _number(outcome.mean("relmse"), ".3g"),
             _number(outcome.mean("psnr_db"), ".2f"), outcome.note])
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Error against the reference",
         ["Run", "Scene / path", "Mode", "Reference", "Frames compared", "Mean LDR-FLIP",
          "relMSE", "PSNR dB", "Note"], error_rows,
@@ -135,7 +137,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
 
     stability_rows = []
     for run in runs:
-        rates = runlog.flips_per_element_per_100(run.selection)
+        rates = run_log.flips_per_element_per_100(run.selection)
         worst = sorted(((rate, element) for element, rate in rates.items() if rate > 0),
                        key=lambda item: (-item[0], item[1]))[:WORST_ELEMENTS]
         values = np.array(list(rates.values()), dtype=float)
@@ -144,7 +146,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
             _number(float(values.mean()) if values.size else None, ".2f"),
             _number(float(values.max()) if values.size else None, ".2f"),
             ", ".join(f"{element} ({rate:.2f})" for rate, element in worst) or "none"])
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         "Selection stability",
         ["Run", "Mode", "Elements", "Mean flips / element / 100 frames", "Max",
          "Worst elements"], stability_rows,
@@ -157,7 +159,7 @@ def _sections(runs, groups, references, errors, files, rows=None, regrets=None, 
     for key, title in (("cpu_model", "CPU"), ("cores", "Cores")):
         machine_rows.append([title, ", ".join(sorted(
             {str((run.summary.get("machine") or {}).get(key)) for run in runs}))])
-    items.append(("table", _Table("Machine and versions", ["", ""], machine_rows)))
+    items.append(("table", ReportTable("Machine and versions", ["", ""], machine_rows)))
     return items
 
 
@@ -185,7 +187,7 @@ SWEEP_TABLE_FORMATS = (("run", "Run", None), ("mode", "Mode", None), ("variant",
 
 def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     items = []
-    items.append(("table", _Table(
+    items.append(("table", ReportTable(
         SWEEP_TABLE_TITLE, [title for _, title, _ in SWEEP_TABLE_FORMATS],
         [[(_number(row[key], spec) if spec else str(row[key])) if row[key] is not None else "–"
           for key, _, spec in SWEEP_TABLE_FORMATS] for row in rows],
@@ -205,7 +207,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
     for (scene, path), variants in by_budget.items():
         fractions = sorted({fraction for per_budget in variants.values() for fraction in per_budget})
         if len(variants) > 1:
-            items.append(("table", _Table(
+            items.append(("table", ReportTable(
                 f"Selection knobs: {scene} / {path}",
                 ["Selection"] + [f"at {fraction:.2f}: LDR-FLIP / regret" for fraction in fractions],
                 [[variant] + [(f"{_number(per_budget[f]['flip'], '.4f')} / {_number(per_budget[f]['regret'], '.4f')}"
@@ -235,7 +237,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
         every = oracle_results.info.get("every") if oracle_results is not None else oracle.DEFAULT_EVERY
         link = (f" Per frame: [{oracle.REGRET_CSV}]({oracle.REGRET_CSV}); each candidate's measured benefit "
                 f"and cost: [{oracle.CANDIDATES_CSV}]({oracle.CANDIDATES_CSV})." if oracle_results is not None else "")
-        items.append(("table", _Table(
+        items.append(("table", ReportTable(
             "Regret against the oracle",
             ["Run", "Selection", "Budget ms", "Sampled frames", "Heuristic LDR-FLIP", "Oracle LDR-FLIP",
              "Mean regret", "Max regret", "Lost %", "Frames the oracle chose otherwise", "Frames over T",
@@ -260,7 +262,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                 continue
             per_element = pop.per_element()
             worst = sorted(per_element.items(), key=lambda item: (-item[1][1], item[0]))[:WORST_ELEMENTS]
-            rates = np.array(list(runlog.flips_per_element_per_100(run.selection).values()), dtype=float)
+            rates = np.array(list(run_log.flips_per_element_per_100(run.selection).values()), dtype=float)
             pop_rows.append([
                 run.label, run.mode.lower(), str(len(pop.pops)),
                 _number(float(rates.mean()) if rates.size else None, ".2f"),
@@ -270,7 +272,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                           if pop.measured) or "none",
                 pop.note or ("reference" if run.mode == "RAYTRACE" and not pop.pops else "")])
     if pop_rows:
-        items.append(("table", _Table(
+        items.append(("table", ReportTable(
             "Popping",
             ["Run", "Mode", "Flips", "Flips / element / 100 frames", "Popping / 100 frames", "Mean per flip",
              "Worst elements (flips, summed popping)", "Note"], pop_rows,
@@ -333,7 +335,7 @@ def _relevance_comparison(scene, path, paper, error):
                       _number(a["regret"], ".4f"), _number(b["regret"], ".4f"),
                       _number(a["popping"], ".4f"), _number(b["popping"], ".4f")])
     verdict, _ = relevance_verdict(paper, error)
-    return [("table", _Table(
+    return [("table", ReportTable(
         f"Paper relevance against error-aware relevance: {scene} / {path}",
         ["Budget at", "Budget ms", "LDR-FLIP, paper R", "LDR-FLIP, error-aware R", "Change",
          "Regret, paper R", "Regret, error-aware R", "Popping / 100, paper R", "Popping / 100, error-aware R"],

@@ -8,7 +8,7 @@ def _markdown_cell(text):
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def _markdown(items):
+def to_markdown(items):
     lines = []
     for item in items:
         kind = item[0]
@@ -37,7 +37,7 @@ _CSS = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222
         "img{max-width:100%}figcaption{font-style:italic;margin-bottom:1.5em}")
 
 
-def _html(items):
+def to_html(items):
     escape = html.escape
     body = []
     for item in items:

@@ -13,7 +13,7 @@ def _figure(**kwargs):
     return Figure(**kwargs)
 
 
-def _plot_error_vs_time(path, groups, errors):
+def plot_error_vs_time(path, groups, errors):
     """One row per (scene, path) (errors of different paths do not compare): mean LDR-FLIP
     and mean relMSE against mean frame time."""
     figure = _figure(figsize=(16, 7.5 * len(groups)))
@@ -94,7 +94,7 @@ def _plot_curves(axes, group, members, errors, key, ylabel):
     axes.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=3, frameon=False)
 
 
-def _plot_selection_quality(path, groups, regrets, pops):
+def plot_selection_quality(path, groups, regrets, pops):
     """Per (scene, path): mean regret against the oracle and popping per 100 frames, against the budget."""
     hybrid_groups = {group: [run for run in members if run.mode == "HYBRID"] for group, members in groups.items()}
     hybrid_groups = {group: members for group, members in hybrid_groups.items() if members}
@@ -132,7 +132,7 @@ def _plot_selection_quality(path, groups, regrets, pops):
     return figure
 
 
-def _plot_timeline(path, groups):
+def plot_timeline(path, groups):
     figure = _figure(figsize=(10, 5.5 * len(groups)))
     axes = figure.subplots(2 * len(groups), 1, squeeze=False,
                            gridspec_kw={"height_ratios": [2, 1] * len(groups)})

@@ -10,7 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import defaults, metrics, runlog
+from .. import defaults
+from . import metrics
+from ..runs import run_log
+from .. import schema
+from ..runs import run_files
 
 
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
@@ -101,7 +105,7 @@ class Run:
         return float(np.percentile(values, q)) if values.size else None
 
     def image(self, frame):
-        return runlog.frame_image_path(self.run_dir, frame)
+        return run_files.frame_image_path(self.run_dir, frame)
 
     @property
     def has_images(self):
@@ -151,15 +155,15 @@ def load_run(run_dir):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ValueError(f"{run_dir} is not a directory: give a RUN_DIR written by 'phrt render'")
-    if not (run_dir / runlog.FRAMES_CSV).exists():
-        raise ValueError(f"{run_dir} has no {runlog.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
+    if not (run_dir / schema.FRAMES_CSV).exists():
+        raise ValueError(f"{run_dir} has no {schema.FRAMES_CSV}: give a RUN_DIR written by 'phrt render'")
     try:
-        summary = runlog.read_summary(run_dir)
+        summary = run_files.read_summary(run_dir)
     except FileNotFoundError:
-        raise ValueError(f"{run_dir} has no {runlog.SUMMARY_JSON}: the run did not finish; "
+        raise ValueError(f"{run_dir} has no {schema.SUMMARY_JSON}: the run did not finish; "
                          f"render it again") from None
     return Run(run_dir=run_dir, label=run_dir.name, summary=summary,
-               frames=runlog.read_frames(run_dir), selection=runlog.read_selection(run_dir))
+               frames=run_files.read_frames(run_dir), selection=run_files.read_selection(run_dir))
 
 
 def pareto_front(times_ms, errors):
@@ -177,14 +181,14 @@ def pareto_front(times_ms, errors):
     return [int(i) for i in front[np.lexsort((errors[front, 0], times[front, 0]))]]
 
 
-def _unique_labels(runs):
+def unique_labels(runs):
     names = [run.run_dir.name for run in runs]
     for run, name in zip(runs, names):
         if names.count(name) > 1:
             run.label = f"{run.run_dir.parent.name}/{name}"
 
 
-def _references(groups, reference):
+def find_references(groups, reference):
     """{group: reference Run or None}."""
     chosen = {}
     if reference is not None:
@@ -199,7 +203,7 @@ def _references(groups, reference):
     return chosen
 
 
-def _measure_group(members, reference):
+def measure_group(members, reference):
     """RunErrors of each run of one (scene, path) group."""
     results = {id(run): RunErrors(run=run, reference=reference) for run in members}
     if reference is None:
@@ -260,7 +264,7 @@ def _measure_group(members, reference):
     return results
 
 
-def _write_errors_csv(path, runs, errors):
+def write_errors_csv(path, runs, errors):
     with open(path, "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(ERROR_COLUMNS)
@@ -269,4 +273,4 @@ def _write_errors_csv(path, runs, errors):
             for row in outcome.per_frame:
                 values = {"scene": run.scene, "path": run.path, "run": run.label, "mode": run.mode,
                           "reference": outcome.reference.label, **row}
-                writer.writerow([runlog.format_value(values[key]) for key in ERROR_COLUMNS])
+                writer.writerow([run_log.format_value(values[key]) for key in ERROR_COLUMNS])

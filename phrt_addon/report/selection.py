@@ -9,11 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import oracle, popping, runlog
+from . import oracle, popping
+from ..runs import run_log
 from .runs import METRIC_THREADS, SWEEP_COLUMNS
 
 
-def _measure_popping(runs, references):
+def measure_run_popping(runs, references):
     """{id(run): PoppingResult} for runs with images whose path has a reference with images."""
     pops = {}
     reference_maps = {}  # shared by the runs (threads may both compute a map: same value)
@@ -34,7 +35,7 @@ def _measure_popping(runs, references):
     return pops
 
 
-def _oracle_results(runs, oracle_dir):
+def load_oracle_results(runs, oracle_dir):
     """The oracle folder's results (several folders, e.g. two sweeps, are merged)."""
     if oracle_dir is None:
         parents = {run.run_dir.resolve().parent for run in runs}
@@ -73,7 +74,7 @@ class RunRegret:
     note: str = ""
 
 
-def _regrets(runs, results):
+def run_regrets(runs, results):
     """{id(run): RunRegret} of the hybrid runs."""
     regrets = {}
     for run in runs:
@@ -133,7 +134,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
         regret = regrets.get(id(run))
         pop = pops.get(id(run))
         hybrid = run.mode == "HYBRID"
-        rates = np.array(list(runlog.flips_per_element_per_100(run.selection).values()), dtype=float)
+        rates = np.array(list(run_log.flips_per_element_per_100(run.selection).values()), dtype=float)
         cost_mode, weight, order, relevance = run.variant
         rows.append({
             "run": run.label, "mode": run.mode, "cost_mode": cost_mode if hybrid else None,
@@ -155,19 +156,19 @@ def sweep_rows(runs, errors, regrets, pops, references):
     return rows
 
 
-def _write_sweep(csv_path, json_path, rows, oracle_results):
+def write_sweep(csv_path, json_path, rows, oracle_results):
     temporary = csv_path.with_name(csv_path.name + ".tmp")
     with open(temporary, "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(SWEEP_COLUMNS)
         for row in rows:
-            writer.writerow([runlog.format_value(row[key]) for key in SWEEP_COLUMNS])
+            writer.writerow([run_log.format_value(row[key]) for key in SWEEP_COLUMNS])
     os.replace(temporary, csv_path)
     document = {"columns": list(SWEEP_COLUMNS), "runs": [{key: row[key] for key in SWEEP_COLUMNS} for row in rows],
                 "oracle": None if oracle_results is None else {
                     "every": oracle_results.info.get("every"), "frames": oracle_results.info.get("frames"),
                     "note": oracle_results.info.get("note")}}
-    document = runlog._round_json(runlog._json_safe(document))
+    document = run_log._round_json(run_log._json_safe(document))
     temporary = json_path.with_name(json_path.name + ".tmp")
     temporary.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     os.replace(temporary, json_path)

@@ -1,8 +1,8 @@
 """Test-only analysis of a selection: the hysteresis margin (see "Hysteresis margin" in
-``phrt_addon/heuristic.py``'s docstring).  Kept out of the shipped core: nothing renders with it."""
+``phrt_addon/select/heuristic.py``'s docstring).  Kept out of the shipped core: nothing renders with it."""
 import numpy as np
 
-from phrt.phrt_addon.heuristic import UNBOUNDED_MARGIN, SelectionGraph, SelectionResult
+from phrt.phrt_addon.select.heuristic import UNBOUNDED_MARGIN, SelectionGraph, SelectionResult
 
 
 def hysteresis_margin(result: SelectionResult) -> np.ndarray:

@@ -14,8 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import heuristic
-from phrt.phrt_addon.cost_model import EFFECTS, CostModel, FrameStats
+from phrt.phrt_addon.select import heuristic
+from phrt.phrt_addon.select import selection_terms
+from phrt.phrt_addon.select.cost_model import EFFECTS, CostModel, FrameStats
 
 FRAME_PX = 640 * 480
 RASTER_MS, SELECT_MS, COMPOSITE_MS = 30.0, 1.0, 4.0
@@ -39,7 +40,7 @@ def frame_elements(mirror_in_view, frame):
     shadows = np.r_[np.ones(N_PROPS, bool), False]
     reflections = np.r_[np.zeros(N_PROPS, bool), True]
     rays_per_pixel = np.r_[np.full(N_PROPS, 3.0), 2.0]
-    return heuristic.FrameElements(names=NAMES, area_px=area, frame_px=FRAME_PX, centre_ndc=centre,
+    return selection_terms.FrameElements(names=NAMES, area_px=area, frame_px=FRAME_PX, centre_ndc=centre,
                                    distance=np.r_[np.linspace(2.0, 6.0, N_PROPS), 3.0], shadows=shadows,
                                    reflections=reflections, rays_per_pixel=rays_per_pixel)
 
@@ -62,7 +63,7 @@ def run_loop(budgets, mirror_in_view, cost_scale=None, overhead_ms=None):
     history = []
     for frame, budget in enumerate(budgets):
         elements = frame_elements(mirror_in_view(frame), frame)
-        settings = heuristic.SelectionSettings(budget_ms=budget, mode="HYBRID", cost_mode="measured")
+        settings = selection_terms.SelectionSettings(budget_ms=budget, mode="HYBRID", cost_mode="measured")
         result = heuristic.select(elements, previous, settings, model, frame=frame)
         scale = cost_scale(frame) if cost_scale else 1.0
         rays, effect_rays, effect_ms = trace(elements, result.selected, scale)

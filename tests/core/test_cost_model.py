@@ -8,11 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import heuristic
-from phrt.phrt_addon.cost_model import (
-    EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats,
-    RobustEstimate, normalise_cost_mode,
-)
+from phrt.phrt_addon.select import heuristic
+from phrt.phrt_addon.select import selection_terms
+from phrt.phrt_addon.select.cost_model import EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats, RobustEstimate, normalise_cost_mode
 
 TRUE_MS_PER_RAY = np.array([1e-4, 4e-4, 6e-4])  # shadows, reflections, refractions
 RAYS_PER_PIXEL_OF_EFFECT = np.array([2.0, 1.0, 3.0])  # 2 lights, 1 reflection, 3 refraction bounces
@@ -37,13 +35,13 @@ def simulate(cost_mode="measured", frames=60, step_frame=30, step=10.0, n=40, se
     scene = _scene(n, seed, mixed_effects)
     rng = np.random.default_rng(seed + 1)
     model = CostModel()
-    settings = heuristic.SelectionSettings(budget_ms=budget_ms, cost_mode=cost_mode)
+    settings = selection_terms.SelectionSettings(budget_ms=budget_ms, cost_mode=cost_mode)
     names = [f"element{i}" for i in range(n)]
     previous = None
     history = []
     for frame in range(frames):
         area = (scene["base_area"] * (1 + 0.3 * np.sin(frame / 7 + scene["phase"]))).astype(np.int64)
-        elements = heuristic.FrameElements(
+        elements = selection_terms.FrameElements(
             names=names, area_px=area, frame_px=FRAME_PX, centre_ndc=scene["centre"], distance=scene["distance"],
             shadows=scene["effects"][:, 0], reflections=scene["effects"][:, 1],
             refractions=scene["effects"][:, 2], rays_per_pixel=scene["rays_per_pixel"])
@@ -214,7 +212,7 @@ def _one_element_frame(**overrides):
     fields = dict(names=["glass"], area_px=np.array([1000]), frame_px=FRAME_PX, reflections=np.array([True]),
                   rays_per_pixel=np.array([2.0]), rt_cost=np.array([1.0]))
     fields.update(overrides)
-    return heuristic.FrameElements(**fields)
+    return selection_terms.FrameElements(**fields)
 
 
 def test_measured_prediction_is_pixels_times_rays_times_cost_per_ray_times_q():
@@ -240,7 +238,7 @@ def test_invisible_element_is_predicted_free_in_measured_mode():
 
 def test_per_effect_cost_per_ray_is_learned_with_overhead_shared():
     elements = _one_element_frame()
-    result = heuristic.select(elements, None, heuristic.SelectionSettings(budget_ms=1e6), CostModel())
+    result = heuristic.select(elements, None, selection_terms.SelectionSettings(budget_ms=1e6), CostModel())
     model = CostModel()
     # 10 ms measured for the whole trace; effect timers say 6 + 2 (2 ms overhead).
     model.observe(FrameStats(trace_ms=10.0, effect_ms={"shadows": 6.0, "reflections": 2.0},
@@ -263,7 +261,7 @@ def test_the_fixed_cost_of_tracing_is_learned_apart_from_the_rays_and_charged_on
     assert model.trace_overhead_ms() == pytest.approx(30.0)
     assert model.ms_per_ray()["reflections"] == pytest.approx(1e-3)
     # T = 100 - 26 = 74 ms; the element costs 1000 px * 2 rays * 1e-3 * Q: 2 ms * Q.
-    settings = heuristic.SelectionSettings(budget_ms=100.0)
+    settings = selection_terms.SelectionSettings(budget_ms=100.0)
     fits = heuristic.select(_one_element_frame(rt_cost=np.array([20.0])), None, settings, model)  # 40 ms
     assert fits.selected[0] and fits.predicted_trace_ms == pytest.approx(70.0)
     too_much = heuristic.select(_one_element_frame(rt_cost=np.array([25.0])), None, settings, model)  # 50 ms
@@ -279,7 +277,7 @@ def test_the_fixed_cost_of_tracing_is_learned_apart_from_the_rays_and_charged_on
 def test_element_rays_teach_the_element_its_own_rays_per_pixel():
     elements = _one_element_frame()
     model = CostModel()
-    result = heuristic.select(elements, None, heuristic.SelectionSettings(budget_ms=1e6), model)
+    result = heuristic.select(elements, None, selection_terms.SelectionSettings(budget_ms=1e6), model)
     # The engine guessed 2 rays per pixel; the tracer cast 3 per pixel.
     model.observe(FrameStats(trace_ms=3000 * 1e-3, effect_rays={"reflections": 3000},
                              effect_ms={"reflections": 3.0}, element_rays=np.array([3000.0])), result)
@@ -289,7 +287,7 @@ def test_element_rays_teach_the_element_its_own_rays_per_pixel():
 
 def test_element_rays_of_the_wrong_length_are_refused():
     elements = _one_element_frame()
-    result = heuristic.select(elements, None, heuristic.SelectionSettings(budget_ms=1e6))
+    result = heuristic.select(elements, None, selection_terms.SelectionSettings(budget_ms=1e6))
     with pytest.raises(ValueError, match="element_rays"):
         CostModel().observe(FrameStats(trace_ms=1.0, element_rays=np.ones(3)), result)
 
@@ -297,7 +295,7 @@ def test_element_rays_of_the_wrong_length_are_refused():
 def test_garbage_measurements_leave_every_prediction_finite():
     elements = _one_element_frame()
     model = CostModel()
-    result = heuristic.select(elements, None, heuristic.SelectionSettings(budget_ms=1e6), model)
+    result = heuristic.select(elements, None, selection_terms.SelectionSettings(budget_ms=1e6), model)
     model.observe(FrameStats(raster_ms=float("nan"), select_ms=-1.0, composite_ms=float("inf"),
                              trace_ms=float("nan"), effect_ms={"shadows": float("inf")},
                              effect_rays={"shadows": -5}, element_rays=np.array([float("nan")])), result)
@@ -345,10 +343,10 @@ def test_measured_mode_recovers_with_mixed_effects_noise_and_outliers():
 
 def test_paper_mode_factor_recovers_from_a_10x_step_on_a_fixed_selection():
     """Open loop (the same selection every frame): the paper's factor follows the step."""
-    elements = heuristic.FrameElements(names=["a", "b"], area_px=np.array([5000, 3000]), frame_px=FRAME_PX,
+    elements = selection_terms.FrameElements(names=["a", "b"], area_px=np.array([5000, 3000]), frame_px=FRAME_PX,
                                        centre_ndc=np.zeros((2, 2)), distance=np.array([2.0, 4.0]),
                                        reflections=np.array([True, True]))
-    settings = heuristic.SelectionSettings(budget_ms=1e6, cost_mode="PAPER")
+    settings = selection_terms.SelectionSettings(budget_ms=1e6, cost_mode="PAPER")
     model = CostModel()
     errors = []
     for frame in range(30):

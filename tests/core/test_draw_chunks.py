@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import draw_chunks
+from phrt.phrt_addon.raster import draw_chunks
 
 
 def _perspective(fov_y=1.0, aspect=4 / 3, near=0.1, far=100.0):

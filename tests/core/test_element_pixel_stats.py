@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.gbuffer import element_pixel_stats
+from phrt.phrt_addon.raster.gbuffer import element_pixel_stats
 
 
 def brute_force(image, n, depth):

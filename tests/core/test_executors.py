@@ -1,12 +1,12 @@
-"""The parts of running a plan that need neither Blender nor a cluster (phrt_addon/executors.py,
-phrt_addon/plan.py): the Dask task's dependency rule, the executor options, the progress line,
+"""The parts of running a plan that need neither Blender nor a cluster (phrt_addon/runs/executors.py,
+phrt_addon/runs/plan.py): the Dask task's dependency rule, the executor options, the progress line,
 jobs with their own scene and path, and dependency order."""
 import io
 import json
 
 import pytest
 
-from phrt.phrt_addon import executors, plan
+from phrt.phrt_addon.runs import executors, plan
 
 
 def test_a_task_whose_dependency_failed_does_not_run_its_job():
@@ -123,7 +123,7 @@ def test_jobs_come_after_what_they_depend_on():
 
 
 def test_the_papers_other_paths_are_one_plan_of_runs_named_as_phrt_render_names_them():
-    from phrt import paper
+    from phrt.cli import paper
     others = paper.other_paths_plan([1, 1000], [640, 480])
     ids = [job.id for job in others.jobs]
     assert len(ids) == len(set(ids)) == 2 * 2 * 3

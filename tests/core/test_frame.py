@@ -7,12 +7,13 @@ leaves out K = 0 elements; every pass is finite."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import shading, shadowmap
+from phrt.phrt_addon.scene import shading
+from phrt.phrt_addon.raster import shadowmap
 from phrt.phrt_addon.frame import FrameRenderer
-from phrt.phrt_addon.gbuffer import GBuffer, GBufferLayer
-from phrt.phrt_addon.lighting import ReferenceRaster
-from phrt.phrt_addon.scene import Camera, Element, Light, Material, SceneSnapshot, Settings
-from phrt.phrt_addon.trace_scene import TraceScene
+from phrt.phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
+from phrt.phrt_addon.raster.reference_raster import ReferenceRaster
+from phrt.phrt_addon.scene.snapshot import Camera, Element, Light, Material, SceneSnapshot, Settings
+from phrt.phrt_addon.trace.embree_scene import TraceScene
 
 from test_tracer import box, quad
 
@@ -154,7 +155,7 @@ def test_the_rays_counted_per_element_are_the_rays_the_effects_cast():
     rays included), or the global residual absorbs the difference, which depends on what is
     selected (on arcade it sat near 3.5 and lagged for ~10 frames, putting early frames over
     budget).  Measured on one frame, the learned residual is then exactly 1."""
-    from phrt.phrt_addon.cost_model import CostModel
+    from phrt.phrt_addon.select.cost_model import CostModel
 
     observed = []
 

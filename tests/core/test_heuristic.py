@@ -1,14 +1,17 @@
 """Selection heuristic: the paper's equations, node selection, modes, logs and
 properties on random scenes (hypothesis).  No bpy."""
-import time
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
-from phrt.phrt_addon import defaults, heuristic, runlog, selection_terms
-from phrt.phrt_addon.cost_model import CostModel
-from phrt.phrt_addon.heuristic import FrameElements, SelectionSettings, select
+from phrt.phrt_addon import defaults
+from phrt.phrt_addon.select import heuristic, selection_terms
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_log
+from phrt.phrt_addon.select.cost_model import CostModel
+from phrt.phrt_addon.select.heuristic import select
+from phrt.phrt_addon.select.selection_terms import FrameElements, SelectionSettings
 
 from hysteresis import hysteresis_margin
 
@@ -246,8 +249,8 @@ def test_rows_have_the_contract_columns_in_order():
     elements = frame(2, area_px=np.array([10, 0]))
     result = select(elements, ["e1"], hybrid(), time_left_ms=5, element_ms=np.ones(2))
     rows = result.rows(frame=12)
-    assert [list(row) for row in rows] == [list(heuristic.SELECTION_COLUMNS)] * 2
-    assert heuristic.SELECTION_COLUMNS == ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S",
+    assert [list(row) for row in rows] == [list(schema.SELECTION_COLUMNS)] * 2
+    assert schema.SELECTION_COLUMNS == ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S",
                                            "R", "selected", "reason")
     assert rows[0] == {"frame": 12, "element": "e0", "visible": 1, "A": 0.01, "P": 1.0, "D": 1.0, "V": 1.0,
                        "Q": 1.0, "C": 1.0, "K": 1.0, "S": 0, "R": 1.0, "selected": 1, "reason": ""}
@@ -260,7 +263,7 @@ def test_selection_flips_of_results_are_counted_per_100_frames_by_the_one_rule()
     on = select(elements, None, hybrid(), time_left_ms=1, element_ms=np.ones(1))
     off = select(elements, None, hybrid(), time_left_ms=0, element_ms=np.ones(1))
     rows = [row for number, result in enumerate([on, off, on, off], 1) for row in result.rows(number)]
-    assert runlog.flips_per_element_per_100(rows) == {"e0": 75.0}  # 3 flips in 4 frames
+    assert run_log.flips_per_element_per_100(rows) == {"e0": 75.0}  # 3 flips in 4 frames
 
 
 def test_mismatched_array_lengths_are_refused_with_the_field_name():
@@ -326,17 +329,15 @@ def test_identical_candidates_tie_deterministically_by_element_order():
     assert again.rows(0) == first.rows(0)
 
 
-def test_a_hundred_thousand_candidates_in_well_under_a_second():
+def test_a_hundred_thousand_candidates_are_selected_within_the_budget():
+    # Speed is measured by `make bench` (benchmarks/selection.py), not asserted on a shared machine.
     n = 100_000
     rng = np.random.default_rng(3)
     elements = FrameElements(names=[f"e{i}" for i in range(n)], area_px=rng.integers(0, 30, n),
                              frame_px=640 * 480, centre_ndc=rng.uniform(-1, 1, (n, 2)),
                              distance=rng.uniform(-1, 100, n), reflections=rng.random(n) < 0.5,
                              shadows=rng.random(n) < 0.5, rays_per_pixel=rng.uniform(0, 4, n))
-    start = time.perf_counter()
     result = select(elements, set(elements.names[::3]), hybrid(budget_ms=150.0), CostModel())
-    elapsed = time.perf_counter() - start
-    assert elapsed < 1.0
     assert 0 < result.selected.sum() < n
     assert result.predicted_trace_ms <= result.time_left_ms
     assert all_finite(result)
@@ -477,7 +478,7 @@ def test_an_element_whose_visibility_changes_by_less_than_its_hysteresis_margin_
 
 @PROPERTY_SETTINGS
 @given(scenes(), st.data(), st.floats(0.0, 300.0), st.sampled_from(["paper", "measured"]),
-       st.sampled_from(heuristic.MODES))
+       st.sampled_from(schema.MODES))
 def test_equal_input_gives_equal_output(scene, data, budget, cost_mode, mode):
     previous = previous_of(data.draw, len(scene["names"]))
     settings_ = SelectionSettings(budget_ms=budget, cost_mode=cost_mode, mode=mode, n_parallel=2)
@@ -491,7 +492,7 @@ def test_equal_input_gives_equal_output(scene, data, budget, cost_mode, mode):
 
 @PROPERTY_SETTINGS
 @given(scenes(extreme=True), st.data(), st.one_of(st.floats(0.0, 1e300), st.just(float("inf"))),
-       st.floats(0.0, 1e6), st.sampled_from(["paper", "measured"]), st.sampled_from(heuristic.MODES))
+       st.floats(0.0, 1e6), st.sampled_from(["paper", "measured"]), st.sampled_from(schema.MODES))
 def test_no_nan_or_inf_anywhere_even_from_extreme_input(scene, data, budget, weight, cost_mode, mode):
     elements = FrameElements(**scene)
     result = select(elements, previous_of(data.draw, len(elements)),

@@ -6,7 +6,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from phrt.phrt_addon import metrics
+from phrt.phrt_addon.report import metrics
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 HEIGHT, WIDTH = 48, 64

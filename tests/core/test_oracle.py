@@ -1,4 +1,4 @@
-"""The oracle's decisions and books (phrt_addon/oracle.py): exact knapsack, sampling, the
+"""The oracle's decisions and books (phrt_addon/report/oracle.py): exact knapsack, sampling, the
 time the oracle may fill, and its folder read back.  No bpy (its renders are tested in
 tests/integration/test_sweep.py)."""
 import itertools
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from phrt.phrt_addon import oracle
+from phrt.phrt_addon.report import oracle
 
 
 def brute_force(values, costs, capacity):

@@ -1,11 +1,12 @@
-"""A sweep as a plan of jobs (phrt_addon/plan.py) and budgets between the modes
-(phrt_addon/budget.py).  No bpy: the jobs here are plain functions."""
+"""A sweep as a plan of jobs (phrt_addon/runs/plan.py) and budgets between the modes
+(phrt_addon/select/mode_budgets.py).  No bpy: the jobs here are plain functions."""
 import json
 
 import pytest
 
-from phrt.phrt_addon import budget, plan
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.select import mode_budgets
+from phrt.phrt_addon.runs import plan
+from phrt.phrt_addon.runs.run_log import RunLog
 
 
 def test_budgets_are_spread_evenly_strictly_between_raster_and_raytrace():
@@ -108,19 +109,19 @@ def test_local_executor_runs_in_order_and_skips_what_depends_on_a_failure(tmp_pa
 # -- budgets between the modes ------------------------------------------------------------------
 
 def test_budget_is_the_fraction_of_the_way_from_raster_to_raytrace():
-    assert budget.budget_between(0.0, 200.0, 600.0) == 200.0
-    assert budget.budget_between(0.25, 200.0, 600.0) == 300.0
-    assert budget.budget_between(1.0, 200.0, 600.0) == 600.0
+    assert mode_budgets.budget_between(0.0, 200.0, 600.0) == 200.0
+    assert mode_budgets.budget_between(0.25, 200.0, 600.0) == 300.0
+    assert mode_budgets.budget_between(1.0, 200.0, 600.0) == 600.0
     for bad in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError):
-            budget.budget_between(bad, 200.0, 600.0)
+            mode_budgets.budget_between(bad, 200.0, 600.0)
 
 
 def test_steady_mean_leaves_out_one_time_setup():
     rows = [{"total_ms": 500.0, "setup_ms": 400.0}, {"total_ms": 110.0, "setup_ms": 10.0},
             {"total_ms": 100.0}, {"total_ms": None}]
-    assert budget.steady_mean_ms(rows) == pytest.approx(100.0)
-    assert budget.steady_mean_ms([]) is None
+    assert mode_budgets.steady_mean_ms(rows) == pytest.approx(100.0)
+    assert mode_budgets.steady_mean_ms([]) is None
 
 
 def test_reference_runs_are_found_by_scene_path_resolution_and_machine(tmp_path):
@@ -129,15 +130,15 @@ def test_reference_runs_are_found_by_scene_path_resolution_and_machine(tmp_path)
     finished_run(tmp_path / "raytrace-cancelled", mode="RAYTRACE", base_ms=900.0, frames=30, cancelled=True)
     cpu = summary["machine"]["cpu_model"]
     assert raytrace["machine"]["cpu_model"] == cpu
-    found = budget.find_reference_runs([tmp_path], "arcade", "path1", (320, 240), cpu)
+    found = mode_budgets.find_reference_runs([tmp_path], "arcade", "path1", (320, 240), cpu)
     assert found == (tmp_path / "raster", tmp_path / "raytrace")
-    assert budget.find_reference_runs([tmp_path], "arcade", "path2", (320, 240), cpu) is None
-    assert budget.find_reference_runs([tmp_path], "arcade", "path1", (640, 480), cpu) is None
-    assert budget.find_reference_runs([tmp_path], "arcade", "path1", (320, 240), "another CPU") is None
+    assert mode_budgets.find_reference_runs([tmp_path], "arcade", "path2", (320, 240), cpu) is None
+    assert mode_budgets.find_reference_runs([tmp_path], "arcade", "path1", (640, 480), cpu) is None
+    assert mode_budgets.find_reference_runs([tmp_path], "arcade", "path1", (320, 240), "another CPU") is None
     # Run folders may be given themselves.
-    assert budget.find_reference_runs([tmp_path / "raster", tmp_path / "raytrace"], "arcade", "path1",
+    assert mode_budgets.find_reference_runs([tmp_path / "raster", tmp_path / "raytrace"], "arcade", "path1",
                                       (320, 240)) == found
-    resolved = budget.from_runs(0.5, *found)
+    resolved = mode_budgets.from_runs(0.5, *found)
     # Steady means: frame 1's 40 ms of set-up left out.  Raster 112.5 - 40/24, raytrace 312.5 - 40/24.
     assert resolved.method == "runs"
     assert resolved.raster_ms == pytest.approx(112.5 - 40 / 24) and resolved.raytrace_ms == pytest.approx(312.5 - 40 / 24)
@@ -147,6 +148,6 @@ def test_reference_runs_are_found_by_scene_path_resolution_and_machine(tmp_path)
 
 
 def test_calibration_frames_spread_over_the_range():
-    assert budget.calibration_frames((1, 1000), 3) == [1, 500, 1000]
-    assert budget.calibration_frames((5, 6), 3) == [5, 6]
-    assert budget.calibration_frames((7, 7), 3) == [7]
+    assert mode_budgets.calibration_frames((1, 1000), 3) == [1, 500, 1000]
+    assert mode_budgets.calibration_frames((5, 6), 3) == [5, 6]
+    assert mode_budgets.calibration_frames((7, 7), 3) == [7]

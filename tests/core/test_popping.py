@@ -1,11 +1,11 @@
-"""Popping (phrt_addon/popping.py) on runs written by hand: multilayer EXRs with the Combined
+"""Popping (phrt_addon/report/popping.py) on runs written by hand: multilayer EXRs with the Combined
 and PHRT Element passes named as Blender 5.0 names them, and real RunLog logs.  No bpy."""
 import numpy as np
 import OpenEXR
 import pytest
 
-from phrt.phrt_addon import metrics, popping
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.report import metrics, popping
+from phrt.phrt_addon.runs.run_log import RunLog
 
 HEIGHT, WIDTH = 40, 60
 # Element 0 ("Ball") covers a square on the left, element 1 ("Box") one on the right.

@@ -4,8 +4,9 @@ import csv
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import metrics, report
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.report import metrics
+from phrt.phrt_addon import report
+from phrt.phrt_addon.runs.run_log import RunLog
 
 HEIGHT, WIDTH = 48, 64
 FRAMES = (1, 2, 3, 4)

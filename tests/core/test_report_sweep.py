@@ -7,8 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import metrics, oracle, report
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.report import metrics, oracle
+from phrt.phrt_addon import report
+from phrt.phrt_addon.runs.run_log import RunLog
 
 HEIGHT, WIDTH = 32, 48
 FRAMES = (1, 2, 3, 4)

@@ -1,12 +1,12 @@
-"""The rules of phrt_addon/rules.py, one home per physical question, on their own and as the
+"""The rules of phrt_addon/scene/rules.py, one home per physical question, on their own and as the
 material table and the tracer's scene use them.  The raster side of each rule is checked by
 rendering through Blender (tests/integration/test_rules_parity.py)."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import rules, shading
-from phrt.phrt_addon.scene import Element, Material
-from phrt.phrt_addon.trace_scene import TraceScene
+from phrt.phrt_addon.scene import rules, shading
+from phrt.phrt_addon.scene.snapshot import Element, Material
+from phrt.phrt_addon.trace.embree_scene import TraceScene
 
 from test_tracer import box, diffuse, quad, snapshot
 

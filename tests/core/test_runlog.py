@@ -7,8 +7,10 @@ import os
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import runlog
-from phrt.phrt_addon.runlog import RunLog
+from phrt.phrt_addon.runs import run_log
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_files
+from phrt.phrt_addon.runs.run_log import RunLog
 
 CALLER_SUMMARY = {"scene": "atrium", "path": "path1", "mode": "HYBRID",
                   "resolution": (64, 48), "budget_ms": 150.0,
@@ -40,8 +42,8 @@ def header(path):
 def test_csv_headers_are_the_contract_columns_then_extras(tmp_path):
     with RunLog(tmp_path) as log:
         log.add_frame(frame_row(1, shadow_rays=5), [selection_row(1, "Sphere", True, area_px=12)])
-    assert header(tmp_path / "frames.csv") == list(runlog.FRAME_COLUMNS) + ["shadow_rays"]
-    assert header(tmp_path / "selection.csv") == list(runlog.SELECTION_COLUMNS) + ["area_px"]
+    assert header(tmp_path / "frames.csv") == list(schema.FRAME_COLUMNS) + ["shadow_rays"]
+    assert header(tmp_path / "selection.csv") == list(schema.SELECTION_COLUMNS) + ["area_px"]
 
 
 def test_cancelled_run_without_close_leaves_complete_rows(tmp_path):
@@ -50,8 +52,8 @@ def test_cancelled_run_without_close_leaves_complete_rows(tmp_path):
         for frame in (1, 2, 3):
             log.add_frame(frame_row(frame), [selection_row(frame, "Sphere", True),
                                              selection_row(frame, "Glass", False)])
-        frames = runlog.read_frames(tmp_path)
-        selection = runlog.read_selection(tmp_path)
+        frames = run_files.read_frames(tmp_path)
+        selection = run_files.read_selection(tmp_path)
         assert [row["frame"] for row in frames] == [1, 2, 3]
         assert len(selection) == 6
         assert frames[2]["total_ms"] == 100.0 and frames[2]["rays"] == 120000
@@ -68,8 +70,8 @@ def test_reader_ignores_a_half_written_last_line(tmp_path):
         handle.write("3,HYBRID,10")
     with open(tmp_path / "selection.csv", "a") as handle:
         handle.write("3,Sphere,1,0.1,0.8,3,0.02,1,0.02,1,0,0.02,1,\n")
-    assert [row["frame"] for row in runlog.read_frames(tmp_path)] == [1, 2]
-    assert [row["frame"] for row in runlog.read_selection(tmp_path)] == [1, 2]
+    assert [row["frame"] for row in run_files.read_frames(tmp_path)] == [1, 2]
+    assert [row["frame"] for row in run_files.read_selection(tmp_path)] == [1, 2]
 
 
 def test_nan_and_inf_never_reach_the_logs(tmp_path):
@@ -81,9 +83,9 @@ def test_nan_and_inf_never_reach_the_logs(tmp_path):
     for name in ("frames.csv", "selection.csv", "summary.json"):
         text = (tmp_path / name).read_text().lower()
         assert "nan" not in text and "inf" not in text, name
-    frames = runlog.read_frames(tmp_path)
+    frames = run_files.read_frames(tmp_path)
     assert frames[0]["total_ms"] is None and frames[0]["trace_ms"] is None
-    assert runlog.read_selection(tmp_path)[0]["A"] is None
+    assert run_files.read_selection(tmp_path)[0]["A"] is None
     assert summary["non_finite_values_dropped"] == 3
     assert summary["total_ms"]["mean"] == 50.0
 
@@ -113,7 +115,7 @@ def test_bools_are_written_as_1_and_0_and_read_back_as_bools(tmp_path):
     lines = (tmp_path / "selection.csv").read_text().splitlines()
     assert lines[1].startswith("1,007,1,") and lines[1].endswith(",1,")
     assert lines[2].endswith(",0,not_visible")
-    rows = runlog.read_selection(tmp_path)
+    rows = run_files.read_selection(tmp_path)
     assert rows[0]["element"] == "007" and rows[0]["selected"] is True
     assert rows[1]["visible"] is False and rows[1]["reason"] == "not_visible"
     assert rows[0]["reason"] == ""
@@ -126,7 +128,7 @@ def test_summary_has_statistics_versions_and_machine(tmp_path):
         log.add_frame(frame_row(frame, total_ms=total, raster_ms=frame),
                       [selection_row(frame, "Sphere", frame % 2 == 1)])
     log.close(dict(CALLER_SUMMARY, images="exr"))
-    summary = runlog.read_summary(tmp_path)
+    summary = run_files.read_summary(tmp_path)
     assert summary["scene"] == "atrium" and summary["path"] == "path1"
     assert summary["mode"] == "HYBRID" and summary["resolution"] == [64, 48]
     assert summary["budget_ms"] == 150.0 and summary["frame_count"] == 5
@@ -154,8 +156,8 @@ def test_flips_count_state_changes_between_consecutive_appearances():
     rows += [{"frame": 1, "element": "c", "selected": True},
              {"frame": 3, "element": "c", "selected": False}]
     # a: 1 0 1 1 -> 2 flips in a 4-frame run; c: 1 . 0 . -> 1 flip.
-    assert runlog.flips_per_element_per_100(rows) == {"a": 50.0, "b": 0.0, "c": 25.0}
-    assert runlog.flips_per_element_per_100([]) == {}
+    assert run_log.flips_per_element_per_100(rows) == {"a": 50.0, "b": 0.0, "c": 25.0}
+    assert run_log.flips_per_element_per_100([]) == {}
 
 
 @pytest.mark.parametrize("selected, reason", [(False, ""), (True, "over_budget"),
@@ -171,7 +173,7 @@ def test_missing_or_unknown_columns_are_refused(tmp_path):
         del row["rays"]
         with pytest.raises(ValueError, match="rays"):
             log.add_frame(row, [selection_row(1, "Sphere", True)])
-        assert runlog.read_frames(tmp_path) == []
+        assert run_files.read_frames(tmp_path) == []
         assert (tmp_path / "selection.csv").read_text().splitlines()[1:] == []
         log.add_frame(frame_row(1), [])
         with pytest.raises(ValueError, match="surprise"):
@@ -186,27 +188,27 @@ def test_opening_a_run_dir_replaces_its_old_logs(tmp_path):
     with RunLog(tmp_path) as second:
         second.add_frame(frame_row(7), [])
         assert not (tmp_path / "summary.json").exists()
-    assert [row["frame"] for row in runlog.read_frames(tmp_path)] == [7]
+    assert [row["frame"] for row in run_files.read_frames(tmp_path)] == [7]
 
 
 def test_frame_image_path_prefers_exr_and_pads_to_four_digits(tmp_path):
     (tmp_path / "frames").mkdir()
     (tmp_path / "frames" / "0012.png").write_bytes(b"")
-    assert runlog.frame_image_path(tmp_path, 12).name == "0012.png"
+    assert run_files.frame_image_path(tmp_path, 12).name == "0012.png"
     (tmp_path / "frames" / "0012.exr").write_bytes(b"")
-    assert runlog.frame_image_path(tmp_path, 12).name == "0012.exr"
-    assert runlog.frame_image_path(tmp_path, 13) is None
+    assert run_files.frame_image_path(tmp_path, 12).name == "0012.exr"
+    assert run_files.frame_image_path(tmp_path, 13) is None
 
 
 def test_format_value_cleans_every_non_finite_kind():
     for value in (float("nan"), float("inf"), -math.inf, np.float16("nan"), np.float64("inf")):
-        assert runlog.format_value(value) == ""
-    assert runlog.format_value(np.int64(3)) == "3"
-    assert runlog.format_value(None) == ""
+        assert run_log.format_value(value) == ""
+    assert run_log.format_value(np.int64(3)) == "3"
+    assert run_log.format_value(None) == ""
 
 
 def test_output_dir_problem_refuses_a_folder_under_a_file_and_creates_nothing(tmp_path):
-    from phrt.phrt_addon.runlog import output_dir_problem
+    from phrt.phrt_addon.runs.run_files import output_dir_problem
     blocker = tmp_path / "file.txt"
     blocker.write_text("x")
     assert output_dir_problem(tmp_path / "new" / "run") is None

@@ -1,15 +1,17 @@
-"""The selection's knobs beside the paper's equations (phrt_addon/heuristic.py): the greedy
+"""The selection's knobs beside the paper's equations (phrt_addon/select/heuristic.py): the greedy
 order, the error-aware relevance, a budget given between the modes, the oracle's forced
-selection; and the error-aware relevance's estimates (phrt_addon/benefit.py).  No bpy."""
+selection; and the error-aware relevance's estimates (phrt_addon/select/benefit.py).  No bpy."""
 import types
 
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.scene import Material
-from phrt.phrt_addon import benefit, heuristic, shading
-from phrt.phrt_addon.cost_model import CostModel
-from phrt.phrt_addon.heuristic import FrameElements, SelectionSettings, select
+from phrt.phrt_addon.scene.snapshot import Material
+from phrt.phrt_addon.select import benefit, heuristic
+from phrt.phrt_addon.scene import shading
+from phrt.phrt_addon.select.cost_model import CostModel
+from phrt.phrt_addon.select.heuristic import select
+from phrt.phrt_addon.select.selection_terms import FrameElements, SelectionSettings
 
 
 def frame(n, **fields):

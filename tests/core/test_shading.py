@@ -1,12 +1,12 @@
-"""The shared BRDF and optics helpers (phrt_addon/shading.py) against closed forms:
+"""The shared BRDF and optics helpers (phrt_addon/scene/shading.py) against closed forms:
 Fresnel, Snell refraction and total internal reflection, mirror reflection, the
 BRDF's reciprocity and energy bound, light units (Cycles' conventions) and
 sanitising of bad input.  No bpy."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import shading
-from phrt.phrt_addon.scene import Light, Material
+from phrt.phrt_addon.scene import shading
+from phrt.phrt_addon.scene.snapshot import Light, Material
 
 
 def unit(*components):
@@ -276,8 +276,8 @@ def test_normalize_leaves_zero_vectors_finite():
 def test_cube_face_views_are_the_signed_axis_permutations_the_glsl_lookup_computes():
     """The GLSL shadow lookup reads no per-face matrix: it computes a cube face's view from the
     point (shadowmap.cube_face_view); that must be each face's look_at view exactly."""
-    from phrt.phrt_addon import shadowmap
-    from phrt.phrt_addon.scene import Light
+    from phrt.phrt_addon.raster import shadowmap
+    from phrt.phrt_addon.scene.snapshot import Light
     light = Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.5, -1.0, 2.0))
     views = shadowmap.light_views(light, ((-5.0, -5.0, -1.0), (5.0, 5.0, 4.0)), 256)
     assert [tuple(-v.view[2, :3]) for v in views] == [tuple(map(float, f)) for f in shadowmap.CUBE_FACES]

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.shadow_region import PointChunks, ShadowRegionIndex, TiledShadowRegions, shadow_region
-from phrt.phrt_addon.scene import Light
+from phrt.phrt_addon.trace.shadow_region import PointChunks, ShadowRegionIndex, TiledShadowRegions, shadow_region
+from phrt.phrt_addon.scene.snapshot import Light
 
 LIGHTS = {
     "sun": Light("Sun", "SUN", (3.0, 3.0, 3.0), direction=(-0.4, 0.5, -0.77)),

@@ -29,3 +29,41 @@ def test_the_state_finder_finds_caches_and_globals(tmp_path):
         "CACHE = {}\nHANDLE = None\nLIMITS = {'a': 1}\nOWNER = Owner()\n\n"
         "def put(k, v):\n    CACHE[k] = v\n\ndef set_handle(h):\n    global HANDLE\n    HANDLE = h\n")
     assert [name for _, name, _ in check.module_state(tmp_path)] == ["CACHE", "HANDLE", "OWNER"]
+
+
+def test_the_whole_project_is_checked_and_has_no_problems():
+    # every package of the project is in the graph: core, engine, operators, panels, cli, scenes
+    tops = {check.top_level(name) for name in check.import_graph()}
+    assert {"phrt.phrt_addon", "phrt.engine", "phrt.operators", "phrt.panels", "phrt.cli",
+            "phrt.sample_scenes"} <= tops
+    assert check.oversized() == []
+    assert check.package_cycles(check.import_graph()) == []
+
+
+def test_the_size_rule_finds_a_long_module_in_any_package(tmp_path):
+    (tmp_path / "cli").mkdir()
+    (tmp_path / "cli" / "long.py").write_text("x = 1\n" * 401)
+    (tmp_path / "panels").mkdir()
+    (tmp_path / "panels" / "short.py").write_text("x = 1\n" * 400)
+    assert check.oversized(tmp_path, allowed={}) == [("cli/long.py", 401)]
+
+
+def test_the_package_rule_finds_a_cycle_through_a_function_level_import(tmp_path):
+    for package in ("engine", "cli"):
+        (tmp_path / package).mkdir()
+        (tmp_path / package / "__init__.py").write_text("")
+    (tmp_path / "engine" / "sweep.py").write_text("def run():\n    from ..cli import blender\n")
+    (tmp_path / "cli" / "blender.py").write_text("from ..engine import sweep\n")
+    graph = check.import_graph(tmp_path)
+    assert check.package_cycles(graph) == [["phrt.cli", "phrt.engine"]]
+    # the modules themselves form a cycle too
+    assert check.cycles(graph) == [["phrt.cli.blender", "phrt.engine.sweep"]]
+
+
+def test_the_core_rule_finds_bpy_imported_through_importlib(tmp_path):
+    (tmp_path / "phrt_addon").mkdir()
+    (tmp_path / "phrt_addon" / "sneaky.py").write_text(
+        "import importlib\n\ndef blender():\n    return importlib.import_module('bpy')\n")
+    (tmp_path / "phrt_addon" / "plain.py").write_text("import gpu\n")
+    assert sorted(check.blender_imports_in_core(tmp_path)) == [("phrt_addon/plain.py", "gpu"),
+                                                             ("phrt_addon/sneaky.py", "bpy")]

@@ -1,4 +1,4 @@
-"""The Embree tracer (phrt_addon/tracer.py) on hand-built scenes: Snell refraction
+"""The Embree tracer (phrt_addon/trace/tracer.py) on hand-built scenes: Snell refraction
 through a slab, total internal reflection, mirror reflection, shadows without
 acne or leaks from 1e-3 to 1e5 world units and at grazing angles, static and
 dynamic geometry, thread-pool parity, and no NaN/Inf.  No bpy: snapshots are
@@ -6,10 +6,12 @@ built with numpy and drive TraceScene / RadianceTracer directly."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import shading, shadowmap, trace_scene
-from phrt.phrt_addon.scene import Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings
-from phrt.phrt_addon.tracer import RadianceTracer
-from phrt.phrt_addon.trace_scene import TraceScene
+from phrt.phrt_addon.scene import shading
+from phrt.phrt_addon.raster import shadowmap
+from phrt.phrt_addon.trace import embree_scene
+from phrt.phrt_addon.scene.snapshot import Camera, Element, Light, Material, MeshInstance, SceneSnapshot, Settings
+from phrt.phrt_addon.trace.tracer import RadianceTracer
+from phrt.phrt_addon.trace.embree_scene import TraceScene
 
 BLACK = (0.0, 0.0, 0.0)
 
@@ -493,7 +495,7 @@ def test_thread_pool_gives_the_same_answers_as_one_thread(closing):
     closing(single)
     closing(pooled)
     rng = np.random.default_rng(3)
-    n = 3 * trace_scene.PARALLEL_CHUNK + 123  # several chunks and a remainder
+    n = 3 * embree_scene.PARALLEL_CHUNK + 123  # several chunks and a remainder
     origins = rng.uniform([-5, -5, 0.5], [5, 5, 4], (n, 3))
     directions = shading.normalize(rng.normal(size=(n, 3)))
     distances = rng.uniform(0.1, 10.0, n)
@@ -535,8 +537,8 @@ def test_degenerate_input_never_produces_nan(closing):
 
 
 def test_ray_epsilon_scales_with_magnitude_and_scene_size():
-    small = trace_scene.ray_epsilon(np.array([[1e-3, 0.0, 0.0]]), 1e-3)[0]
-    large = trace_scene.ray_epsilon(np.array([[1e5, 0.0, 0.0]]), 1e5)[0]
+    small = embree_scene.ray_epsilon(np.array([[1e-3, 0.0, 0.0]]), 1e-3)[0]
+    large = embree_scene.ray_epsilon(np.array([[1e5, 0.0, 0.0]]), 1e5)[0]
     # Several float32 ulps of the coordinate, far below the scene's size.
     assert 4 * np.spacing(np.float32(1e-3)) < small < 1e-3 * 1e-3
     assert 4 * np.spacing(np.float32(1e5)) < large < 1e-3 * 1e5
@@ -596,7 +598,7 @@ def test_shadow_map_lookup_agrees_with_traced_shadows_away_from_edges(kind, clos
     def traced_lit(world):
         trace = scene.to_trace(world)
         direction, distance, _ = shading.light_incidence(light, trace, scene.origin)
-        eps = trace_scene.ray_epsilon(trace, scene.extent)
+        eps = embree_scene.ray_epsilon(trace, scene.extent)
         return ~scene.occluded(trace + normals[: len(trace)] * eps[:, None], direction, distance - 2 * eps)
 
     lit = traced_lit(points)

@@ -7,11 +7,13 @@ acne at the silhouette of a coarse smooth sphere), and no NaN/Inf anywhere."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon import rules, shading, shadowmap, trace_scene, tracer
+from phrt.phrt_addon.scene import rules, shading
+from phrt.phrt_addon.raster import shadowmap
+from phrt.phrt_addon.trace import embree_scene, tracer
 from phrt.phrt_addon.frame import FrameRenderer
-from phrt.phrt_addon.lighting import ReferenceRaster
-from phrt.phrt_addon.gbuffer import GBuffer, GBufferLayer, geometric_normals
-from phrt.phrt_addon.scene import Camera, Element, Light, Material, SceneSnapshot, Settings
+from phrt.phrt_addon.raster.reference_raster import ReferenceRaster
+from phrt.phrt_addon.raster.gbuffer import GBuffer, GBufferLayer, geometric_normals
+from phrt.phrt_addon.scene.snapshot import Camera, Element, Light, Material, SceneSnapshot, Settings
 
 from test_tracer import (GLASS, MIRROR, box, build, diffuse, emissive, quad, snapshot, translation,  # noqa: E402
                          uv_sphere)
@@ -219,12 +221,12 @@ def test_millimetre_props_keep_their_shadows_beside_a_mountain_1e5_away(closing)
 def test_precision_clusters_keep_each_mesh_close_to_its_origin():
     lows = np.array([[-1e-3, -1e-3, 0], [-10, -10, 0], [1e5, 1e5, 0], [1e5 + 5, 1e5, 0]])
     highs = lows + np.array([[2e-3, 2e-3, 1e-3], [20, 20, 0], [1e3, 1e3, 1e3], [1, 1, 1]])
-    origins, extents, cluster = trace_scene.precision_clusters(lows, highs)
+    origins, extents, cluster = embree_scene.precision_clusters(lows, highs)
     centres, sizes = (lows + highs) / 2, np.max(highs - lows, axis=1)
     reach = np.max(np.abs(centres - origins[cluster]), axis=1) + sizes / 2
-    assert np.all(reach <= trace_scene.PRECISION_RATIO * sizes)
+    assert np.all(reach <= embree_scene.PRECISION_RATIO * sizes)
     assert cluster[0] != cluster[2] and cluster[2] == cluster[3]
-    assert len(origins) <= trace_scene.MAX_CLUSTERS and np.all(extents > 0)
+    assert len(origins) <= embree_scene.MAX_CLUSTERS and np.all(extents > 0)
 
 
 def test_secondary_directions_are_bent_out_of_the_geometric_surface():
@@ -253,7 +255,7 @@ def raycast_gbuffer(snap):
     """The G-buffer the GPU would draw, by tracing one camera ray per pixel centre: positions
     relative to the camera, interpolated (shading) normals as authored, ids, roughness."""
     camera = snap.camera
-    scene = trace_scene.TraceScene(threads=1)
+    scene = embree_scene.TraceScene(threads=1)
     try:
         scene.update(snap)
         origins, directions = camera.pixel_rays()
@@ -322,7 +324,7 @@ def test_geometric_normals_of_the_gbuffer_are_the_facets():
     directions = shading.normalize(layer.position.reshape(-1, 3)[flat].astype(np.float64))
     normals = geometric_normals(layer, flat, directions)
     # Facet normals of the sphere: the ray cast's own Ng at those pixels.
-    scene = trace_scene.TraceScene(threads=1)
+    scene = embree_scene.TraceScene(threads=1)
     try:
         scene.update(snap)
         hits = scene.intersect(scene.to_trace(np.broadcast_to(snap.camera.position, directions.shape)), directions)

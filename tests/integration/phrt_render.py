@@ -14,7 +14,7 @@ import numpy as np
 
 from phrt import compat
 from phrt.engine import extract, final
-from phrt.phrt_addon import metrics
+from phrt.phrt_addon.report import metrics
 from exr_passes import read_passes
 
 MODES = ("RASTER", "HYBRID", "RAYTRACE")

@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 
 from phrt import compat
-from phrt.phrt_addon import runlog
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes import showcase
 from exr_passes import read_passes
 
@@ -134,7 +135,7 @@ def run_dir_of(files, case):
     cwd = files / "cases" / case
     if (cwd / "run").exists():
         return cwd / "run"
-    found = [path.parent for path in cwd.rglob(runlog.FRAMES_CSV)]
+    found = [path.parent for path in cwd.rglob(schema.FRAMES_CSV)]
     assert len(found) == 1, found
     return found[0]
 
@@ -142,22 +143,22 @@ def run_dir_of(files, case):
 def check_run_is_valid(run_dir, partial):
     """Every image under a final name is complete and readable, one per logged frame; no
     temporary file is left; summary.json says whether the run is partial."""
-    frames = runlog.read_frames(run_dir)
-    images = sorted((run_dir / runlog.FRAMES_DIR).glob("*"))
+    frames = run_files.read_frames(run_dir)
+    images = sorted((run_dir / schema.FRAMES_DIR).glob("*"))
     leftovers = [path.name for path in run_dir.rglob("*") if "partial" in path.name or path.suffix == ".tmp"]
     assert leftovers == []
     logged = {row["frame"] for row in frames}
     for image in images:
-        assert runlog.image_is_complete(image), image
+        assert run_files.image_is_complete(image), image
         if image.suffix == ".exr":
             passes = read_passes(image)
             assert {"Combined", "Depth", "Normal", "PHRT Selected", "PHRT Candidate"} <= set(passes)
             assert all(np.all(np.isfinite(pixels)) for pixels in passes.values())
         assert int(image.stem) in logged
-    summary = runlog.read_summary(run_dir)
+    summary = run_files.read_summary(run_dir)
     assert summary["partial"] is partial
     assert summary["frame_count"] == len(frames)
-    for row in runlog.read_selection(run_dir):
+    for row in run_files.read_selection(run_dir):
         assert row["frame"] in logged
     return frames, images, summary
 
@@ -196,7 +197,7 @@ def test_unsupported_objects_are_warned_about_once_with_their_count(files, runs)
     frames, _, summary = check_run_is_valid(files / "cases" / "odd_objects" / "run", partial=False)
     assert len(frames) == 3
     assert sorted(item["frames"] for item in summary["problems"]) == [3, 3, 3]
-    rows = runlog.read_selection(files / "cases" / "odd_objects" / "run")
+    rows = run_files.read_selection(files / "cases" / "odd_objects" / "run")
     assert {"NoMaterial", "Rope"} <= {row["element"] for row in rows}
 
 
@@ -222,7 +223,7 @@ def test_a_full_disk_while_writing_logs_keeps_the_complete_rows(files, runs):
     frames, _, summary = check_run_is_valid(run_dir, partial=True)
     assert 3 <= len(frames) < FRAMES
     assert [row["frame"] for row in frames] == list(range(1, len(frames) + 1))
-    assert (run_dir / runlog.SELECTION_CSV).stat().st_size <= 6000
+    assert (run_dir / schema.SELECTION_CSV).stat().st_size <= 6000
 
 
 def test_the_operator_reports_a_full_disk_and_keeps_a_partial_summary(files, runs):
@@ -242,7 +243,7 @@ def test_a_signal_stops_the_replay_between_frames_and_keeps_everything_complete(
     try:
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline:
-            if (run_dir / runlog.FRAMES_CSV).exists() and len(runlog.read_frames(run_dir)) >= 2:
+            if (run_dir / schema.FRAMES_CSV).exists() and len(run_files.read_frames(run_dir)) >= 2:
                 break
             if process.poll() is not None:
                 break

@@ -19,7 +19,8 @@ import bpy  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
-from phrt.phrt_addon import runlog  # noqa: E402
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes.showcase import add_camera, build_showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
@@ -127,7 +128,7 @@ def report(files, runs):
 
 
 def _frames_written(run_dir):
-    return sorted(path.name for path in (run_dir / runlog.FRAMES_DIR).iterdir())
+    return sorted(path.name for path in (run_dir / schema.FRAMES_DIR).iterdir())
 
 
 def _check_succeeded(result):
@@ -140,9 +141,9 @@ def _check_succeeded(result):
 def test_render_path_frames_mode_resolution_out(files, runs):
     _check_succeeded(runs["raytrace"])
     run_dir = files / "cases" / "raytrace" / "runs" / "rt"
-    frames = runlog.read_frames(run_dir)
+    frames = run_files.read_frames(run_dir)
     assert [row["frame"] for row in frames] == [1, 2, 3] and {row["mode"] for row in frames} == {"RAYTRACE"}
-    summary = runlog.read_summary(run_dir)
+    summary = run_files.read_summary(run_dir)
     assert summary["path"] == "Camera" and summary["scene"] == "showcase" and summary["resolution"] == [128, 96]
     assert _frames_written(run_dir) == ["0001.exr", "0002.exr", "0003.exr"]
     assert not (files / "cases" / "raytrace" / "out").exists()
@@ -151,10 +152,10 @@ def test_render_path_frames_mode_resolution_out(files, runs):
 def test_render_defaults_to_the_whole_path_hybrid_and_out_folder(files, runs):
     _check_succeeded(runs["hybrid_whole_path"])
     run_dir = files / "cases" / "hybrid_whole_path" / "out" / "showcase-Camera-hybrid"
-    frames = runlog.read_frames(run_dir)
+    frames = run_files.read_frames(run_dir)
     assert [row["frame"] for row in frames] == list(range(1, PATH_FRAMES + 1))
     assert {row["mode"] for row in frames} == {"HYBRID"} and {row["budget_ms"] for row in frames} == {5}
-    summary = runlog.read_summary(run_dir)
+    summary = run_files.read_summary(run_dir)
     assert summary["budget_ms"] == 5 and summary["frame_count"] == PATH_FRAMES
     assert len(_frames_written(run_dir)) == PATH_FRAMES
     assert runs["hybrid_whole_path"][1].rstrip().endswith("-> out/showcase-Camera-hybrid")
@@ -164,17 +165,17 @@ def test_render_png_images_of_another_path_at_the_scene_resolution(files, runs):
     _check_succeeded(runs["raster_png"])
     run_dir = files / "cases" / "raster_png" / "out" / "showcase-Overview-raster"
     assert _frames_written(run_dir) == ["0002.png"]
-    summary = runlog.read_summary(run_dir)
+    summary = run_files.read_summary(run_dir)
     assert summary["path"] == "Overview" and summary["resolution"] == [160, 120] and summary["mode"] == "RASTER"
-    assert all(not row["selected"] for row in runlog.read_selection(run_dir))
+    assert all(not row["selected"] for row in run_files.read_selection(run_dir))
 
 
 def test_render_without_images_writes_logs_only(files, runs):
     _check_succeeded(runs["no_images"])
     run_dir = files / "cases" / "no_images" / "runs" / "none"
     assert _frames_written(run_dir) == []
-    assert [row["frame"] for row in runlog.read_frames(run_dir)] == [30]
-    assert json.loads((run_dir / runlog.SUMMARY_JSON).read_text())["images"] == "none"
+    assert [row["frame"] for row in run_files.read_frames(run_dir)] == [30]
+    assert json.loads((run_dir / schema.SUMMARY_JSON).read_text())["images"] == "none"
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
@@ -208,7 +209,7 @@ def test_batch_replay_of_docs_batch_md_writes_one_run_per_mode(files, runs):
     assert status == 0, stderr
     for mode in ("raster", "raytrace"):
         run_dir = files / "batch_runs" / f"showcase-Camera-{mode}"
-        assert [row["frame"] for row in runlog.read_frames(run_dir)] == [1, 2]
-        assert runlog.read_summary(run_dir)["mode"] == mode.upper()
+        assert [row["frame"] for row in run_files.read_frames(run_dir)] == [1, 2]
+        assert run_files.read_summary(run_dir)["mode"] == mode.upper()
     assert runs["batch_script_error"][0] != 0  # a failing operator call fails the script
     assert "RuntimeError: Error: PHRT: no camera path 'Nope'" in "\n".join(runs["batch_script_error"][2])

@@ -25,8 +25,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import phrt  # noqa: E402
-from phrt import blender_process, compat  # noqa: E402
-from phrt.phrt_addon import runlog  # noqa: E402
+from phrt.cli import blender_process  # noqa: E402
+from phrt import compat  # noqa: E402
+from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
 
 from exr_passes import read_passes  # noqa: E402
@@ -91,8 +92,8 @@ def test_phrt_render_exits_0_with_only_its_summary_on_stdout(tmp_path):
     lines = stdout.splitlines()
     assert len(lines) == 1 and lines[0].startswith("phrt: scene/Camera hybrid: 2 frames"), stdout
     run_dir = tmp_path / "run"
-    assert [row["frame"] for row in runlog.read_frames(run_dir)] == [1, 2]
-    assert runlog.read_summary(run_dir)["blender_version"] == bpy.app.version_string
+    assert [row["frame"] for row in run_files.read_frames(run_dir)] == [1, 2]
+    assert run_files.read_summary(run_dir)["blender_version"] == bpy.app.version_string
     passes = read_passes(run_dir / "frames" / "0002.exr")  # multilayer EXR on every version
     assert {"Combined", "Depth", "Normal", "PHRT Selected", "PHRT Candidate"} <= set(passes)
     assert passes["Combined"].shape == (48, 64, 4)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from phrt.phrt_addon import executors, plan
+from phrt.phrt_addon.runs import executors, plan
 
 
 def attempt_job(plan_path, job_id):

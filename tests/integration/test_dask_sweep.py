@@ -1,5 +1,5 @@
 """Sweep plans on a Dask LocalCluster of 2 worker processes, each importing bpy and registering
-PHRT (dask_worker.py), rendering a small .blend (the showcase, 64x48, a few frames) through the
+PHRT (cli/dask_worker.py), rendering a small .blend (the showcase, 64x48, a few frames) through the
 real replay, Embree and EXR files:
 
 - a 4-run plan gives the same run directories as the local executor (images and logs equal apart
@@ -30,9 +30,10 @@ import OpenEXR  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
-from phrt.engine import sweep as sweep_engine  # noqa: E402
-from phrt.phrt_addon import plan as plan_module  # noqa: E402
-from phrt.phrt_addon import runlog  # noqa: E402
+from phrt.cli import sweep as sweep_engine  # noqa: E402
+from phrt.phrt_addon.runs import plan as plan_module  # noqa: E402
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_files
 from phrt_render import save_moving_showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
@@ -81,18 +82,18 @@ def read_csv(path):
 def assert_same_run(local, distributed):
     files = sorted(str(path.relative_to(local)) for path in local.rglob("*"))
     assert files == sorted(str(path.relative_to(distributed)) for path in distributed.rglob("*")), local.name
-    for name in (runlog.FRAMES_CSV, runlog.SELECTION_CSV):
+    for name in (schema.FRAMES_CSV, schema.SELECTION_CSV):
         rows, others = read_csv(local / name), read_csv(distributed / name)
         assert len(rows) == len(others) > 0 and rows[0].keys() == others[0].keys()
         for row, other in zip(rows, others):
             differ = {key for key in row if row[key] != other[key]}
             assert all(timing(key) for key in differ), (local.name, name, differ)
-    summary, other = runlog.read_summary(local), runlog.read_summary(distributed)
+    summary, other = run_files.read_summary(local), run_files.read_summary(distributed)
     assert summary.keys() == other.keys()
     assert {key for key in summary if summary[key] != other[key] and not timing(key)} == set()
-    for image in sorted((local / runlog.FRAMES_DIR).glob("*.exr")):
+    for image in sorted((local / schema.FRAMES_DIR).glob("*.exr")):
         parts = OpenEXR.File(str(image)).parts
-        other_parts = OpenEXR.File(str(distributed / runlog.FRAMES_DIR / image.name)).parts
+        other_parts = OpenEXR.File(str(distributed / schema.FRAMES_DIR / image.name)).parts
         assert [sorted(part.channels) for part in parts] == [sorted(part.channels) for part in other_parts]
         for part, other_part in zip(parts, other_parts):
             for channel in part.channels:
@@ -178,8 +179,8 @@ def test_a_run_whose_worker_is_killed_is_retried_elsewhere_and_completes(blend, 
     assert not list(tmp_path.glob(".*partial*"))
     run = tmp_path / "showcase-Camera-raytrace"
     assert plan_module.run_is_complete(run, built)
-    assert len(read_csv(run / runlog.FRAMES_CSV)) == 12
-    assert sorted(path.name for path in (run / runlog.FRAMES_DIR).iterdir()) == [f"{f:04d}.exr" for f in range(1, 13)]
+    assert len(read_csv(run / schema.FRAMES_CSV)) == 12
+    assert sorted(path.name for path in (run / schema.FRAMES_DIR).iterdir()) == [f"{f:04d}.exr" for f in range(1, 13)]
     # The killed process is the only worker that did not exit with status 0 (the others, and the
     # one started in its place, import bpy and exit cleanly).
     assert executor.worker_exits == [(killed[0], "was killed by signal 9")]

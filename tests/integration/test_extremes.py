@@ -18,8 +18,10 @@ bpy = pytest.importorskip("bpy")
 
 import bmesh  # noqa: E402
 
-from phrt.engine import final, replay  # noqa: E402
-from phrt.phrt_addon import rules, runlog  # noqa: E402
+from phrt.engine import final  # noqa: E402
+from phrt.engine.runs import replay  # noqa: E402
+from phrt.phrt_addon.scene import rules  # noqa: E402
+from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes import showcase  # noqa: E402
 from phrt_render import MODES, camera_rays, render, selected_elements, set_world  # noqa: E402
 
@@ -356,14 +358,14 @@ def test_budgets_of_zero_huge_and_changing_every_frame_in_a_replay(tmp_path):
             point.interpolation = "CONSTANT"
     result = replay.replay(scene, scene.camera, (1, len(budgets)), "HYBRID", tmp_path / "run", images="none")
     assert result.frames_done == len(budgets) and not result.cancelled
-    frames = runlog.read_frames(tmp_path / "run")
+    frames = run_files.read_frames(tmp_path / "run")
     assert [row["budget_ms"] for row in frames] == pytest.approx(budgets)
-    selection = runlog.read_selection(tmp_path / "run")
+    selection = run_files.read_selection(tmp_path / "run")
     for row, budget in zip(frames, budgets):
         reasons = [entry["reason"] for entry in selection if entry["frame"] == row["frame"]]
         if budget == 0.0:
             assert row["n_selected"] == 0 and row["predicted_trace_ms"] == 0
         if budget == 1e9:
             assert row["n_selected"] > 0 and "over_budget" not in reasons
-    summary = runlog.read_summary(tmp_path / "run")
+    summary = run_files.read_summary(tmp_path / "run")
     assert summary["non_finite_values_dropped"] == 0 and summary["partial"] is False

@@ -170,7 +170,7 @@ def test_user_installs_zip_and_renders(tmp_path):
                          env=env, cwd=tmp_path, timeout=600)
     assert run.returncode == 0 and "PHRT-ZIP-OK" in run.stdout, run.stdout[-3000:] + run.stderr[-3000:]
     assert out.exists() and out.stat().st_size > 0
-    from phrt.phrt_addon.metrics import read_image
+    from phrt.phrt_addon.report.metrics import read_image
     image = read_image(out)
     assert image.shape[:2] == (72, 96)
     assert image[36, 48].sum() > 0.05  # the lit cube is in the middle

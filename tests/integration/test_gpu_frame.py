@@ -1,7 +1,7 @@
 """The GPU-resident raster half (engine/raster.py, engine/gpu_resources.py, engine/shaders.py).
 
 - Parity: one G-buffer shaded by the GLSL passes and by the numpy reference
-  (phrt_addon/lighting.py, the equations of shading.py and shadowmap.py) agrees within
+  (phrt_addon/raster/reference_raster.py, the equations of shading.py and shadowmap.py) agrees within
   1e-3 relative on lit pixels, with and without traced results.
 - Lifetimes: a static replay creates no GPU resource after its first frame; a moved
   object re-uploads nothing, an edited mesh only itself, a moved light only its own
@@ -23,9 +23,9 @@ bpy = pytest.importorskip("bpy")
 import bmesh  # noqa: E402
 
 from phrt.engine import extract, final, raster, session  # noqa: E402
-from phrt.phrt_addon import lighting  # noqa: E402
-from phrt.phrt_addon.frame import TracedTerms  # noqa: E402
-from phrt.phrt_addon.scene import Element, Material, MeshInstance  # noqa: E402
+from phrt.phrt_addon.raster import reference_raster  # noqa: E402
+from phrt.phrt_addon.frame_types import TracedTerms
+from phrt.phrt_addon.scene.snapshot import Element, Material, MeshInstance  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 
 from gpu_probe import run_on_gpu  # noqa: E402
@@ -68,7 +68,7 @@ def gpu_and_reference(scene, traced_for=None):
             layer.metallic = np.ascontiguousarray(albedo[..., 3])
         traced = traced_for(snapshot, gbuffer) if traced_for else None
         gpu_image = frame.shade(traced)
-        reference = lighting.ReferenceRaster(snapshot, gbuffer, frame.read_shadow_maps()).shade(traced)
+        reference = reference_raster.ReferenceRaster(snapshot, gbuffer, frame.read_shadow_maps()).shade(traced)
         return gpu_image, reference, gbuffer
     return run_on_gpu(scene, job)
 

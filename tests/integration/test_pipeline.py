@@ -19,7 +19,8 @@ bpy = pytest.importorskip("bpy")
 
 from phrt import compat  # noqa: E402
 from phrt.engine import extract, final  # noqa: E402
-from phrt.phrt_addon import metrics, shading  # noqa: E402
+from phrt.phrt_addon.report import metrics  # noqa: E402
+from phrt.phrt_addon.scene import shading  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 from phrt_render import box_hit, erode, plane_hit  # noqa: E402
 

@@ -17,9 +17,11 @@ import pytest  # noqa: E402
 
 bpy = pytest.importorskip("bpy")
 
-from phrt.engine import final, replay, session  # noqa: E402
-from phrt.engine import oracle as oracle_engine  # noqa: E402
-from phrt.phrt_addon import metrics, oracle, runlog  # noqa: E402
+from phrt.engine import final, session  # noqa: E402
+from phrt.engine.runs import replay  # noqa: E402
+from phrt.engine.runs import oracle as oracle_engine  # noqa: E402
+from phrt.phrt_addon.report import metrics, oracle  # noqa: E402
+from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes import showcase as build  # noqa: E402
 
 # A regret below 0 beyond this is the oracle doing worse than the heuristic (benefits of
@@ -138,12 +140,12 @@ def replayed(tmp_path_factory):
 
 def test_a_budget_at_resolves_from_the_runs_beside_it(replayed):
     _, _, runs, _, _ = replayed
-    summary = runlog.read_summary(runs["tight"])
+    summary = run_files.read_summary(runs["tight"])
     source = summary["budget_source"]
     assert source["method"] == "runs" and summary["budget_at"] == 0.3
     assert summary["budget_ms"] == pytest.approx(source["raster_ms"] + 0.3 * (source["raytrace_ms"] - source["raster_ms"]),
                                                  rel=1e-4)
-    for row in runlog.read_frames(runs["tight"]):
+    for row in run_files.read_frames(runs["tight"]):
         assert row["budget_ms"] == pytest.approx(summary["budget_ms"], rel=1e-4)
 
 
@@ -168,8 +170,8 @@ def test_no_regret_when_the_budget_covers_every_candidate(replayed):
 
 def test_forcing_the_heuristics_own_choice_renders_its_image_exactly(replayed):
     scene, camera, runs, _, _ = replayed
-    chosen = {row["element"] for row in runlog.read_selection(runs["tight"]) if row["frame"] == 3 and row["selected"]}
+    chosen = {row["element"] for row in run_files.read_selection(runs["tight"]) if row["frame"] == 3 and row["selected"]}
     with oracle_engine.ForcedRenderer(scene, camera, (96, 72)) as renderer:
         image, _, _ = renderer.render(3, chosen)
-    run_image = metrics.read_image(runlog.frame_image_path(runs["tight"], 3))
+    run_image = metrics.read_image(run_files.frame_image_path(runs["tight"], 3))
     np.testing.assert_array_equal(image, run_image)

@@ -1,4 +1,4 @@
-"""One rule per physical question, rastered and traced alike (phrt_addon/rules.py), rendered
+"""One rule per physical question, rastered and traced alike (phrt_addon/scene/rules.py), rendered
 through Blender with the real engine, GPU raster and Embree.
 
 The window trick: a clear pane of IOR 1 (or below: clamped to 1) bends and reflects nothing, so
@@ -22,7 +22,7 @@ bpy = pytest.importorskip("bpy")
 import bmesh  # noqa: E402
 
 from phrt.engine import final  # noqa: E402
-from phrt.phrt_addon import rules  # noqa: E402
+from phrt.phrt_addon.scene import rules  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 from phrt_render import box_hit, camera_rays, erode, plane_hit, render, selected_elements, set_world  # noqa: E402
 

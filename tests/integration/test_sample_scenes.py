@@ -20,7 +20,7 @@ bpy = pytest.importorskip("bpy")
 rtcs = pytest.importorskip("embreex.rtcore_scene")
 from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
-from phrt.sample_scenes import generate, geometry  # noqa: E402
+from phrt.sample_scenes import generate, geometry, transforms  # noqa: E402
 
 FRAMES = np.arange(1, 1001)
 SAMPLED = np.unique(np.concatenate((np.arange(1, 1001, 10), [1000])))
@@ -414,5 +414,5 @@ def test_closed_primitives_wind_outward(part):
 
 
 def test_mirrored_part_keeps_normals_outward():
-    part = geometry.box((0, 0, 0), (1, 1, 1)).transformed(geometry.scale(-1.0, 1.0, 1.0))
+    part = geometry.box((0, 0, 0), (1, 1, 1)).transformed(transforms.scale(-1.0, 1.0, 1.0))
     assert geometry.signed_volume(part) > 0.0

@@ -20,8 +20,8 @@ import bpy  # noqa: E402
 import pytest  # noqa: E402
 
 import phrt  # noqa: E402
-from phrt.phrt_addon import plan as plan_module  # noqa: E402
-from phrt.phrt_addon import runlog  # noqa: E402
+from phrt.phrt_addon.runs import plan as plan_module  # noqa: E402
+from phrt.phrt_addon.runs import run_files
 from phrt_render import save_moving_showcase  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
@@ -71,9 +71,9 @@ def test_sweep_writes_plan_runs_oracle_and_report(sweeps):
     assert len(runs) == 2 + len(plan_module.VARIANTS) and plan["budgets"] == [0.5]
     assert set(statuses(stdout).values()) == {"done"} and len(statuses(stdout)) == len(plan["jobs"])
     for run in runs:
-        summary = runlog.read_summary(folder / run)
+        summary = run_files.read_summary(folder / run)
         assert summary["frame_count"] == 3 and summary["resolution"] == [64, 48]
-    hybrid = runlog.read_summary(folder / "showcase-Camera-hybrid-at0.50-measured")
+    hybrid = run_files.read_summary(folder / "showcase-Camera-hybrid-at0.50-measured")
     assert hybrid["budget_source"]["method"] == "runs" and hybrid["budget_at"] == 0.5
     assert not list(folder.glob(".*partial*"))  # every job renamed its folder when complete
     with open(folder / "report" / "sweep.csv", newline="") as handle:
@@ -97,7 +97,7 @@ def test_a_run_whose_summary_is_missing_is_redone_and_so_is_the_oracle(sweeps):
     assert status == 0, errors
     done = {job for job, state in statuses(stdout).items() if state == "done"}
     assert done == {"showcase-Camera-hybrid-at0.50-error", "oracle"}
-    assert runlog.read_summary(folder / "showcase-Camera-hybrid-at0.50-error")["frame_count"] == 3
+    assert run_files.read_summary(folder / "showcase-Camera-hybrid-at0.50-error")["frame_count"] == 3
 
 
 def test_render_budget_at_resolves_from_runs_beside_it_or_calibrates(blend, sweeps):
@@ -108,8 +108,8 @@ def test_render_budget_at_resolves_from_runs_beside_it_or_calibrates(blend, swee
     alone = run_phrt(["render", str(blend), "--frames", "1-3", "--resolution", "64x48", "--budget-at", "0.25",
                       "--out", "alone/hybrid"], folder)
     assert beside[0] == 0 and alone[0] == 0, (beside[2], alone[2])
-    from_runs = runlog.read_summary(folder / "sw" / "extra-hybrid")["budget_source"]
-    calibrated = runlog.read_summary(folder / "alone" / "hybrid")["budget_source"]
+    from_runs = run_files.read_summary(folder / "sw" / "extra-hybrid")["budget_source"]
+    calibrated = run_files.read_summary(folder / "alone" / "hybrid")["budget_source"]
     assert from_runs["method"] == "runs" and from_runs["raster_run"].endswith("showcase-Camera-raster")
     assert calibrated["method"] == "calibration" and calibrated["calibration_frames"] == [1, 2, 3]
     for source in (from_runs, calibrated):

@@ -19,8 +19,10 @@ import pytest  # noqa: E402
 
 import phrt  # noqa: E402
 from phrt import compat  # noqa: E402
-from phrt.engine import final, replay, session, viewport  # noqa: E402
-from phrt.phrt_addon import runlog  # noqa: E402
+from phrt.engine import final, session, viewport  # noqa: E402
+from phrt.engine.runs import replay  # noqa: E402
+from phrt.phrt_addon import schema
+from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
 from gpu_probe import run_on_gpu  # noqa: E402
 
@@ -387,14 +389,14 @@ def test_operators_and_panels_unregister_cleanly(scene):
 def check_run(run_dir, frames, mode, images="exr"):
     """The files of a finished run agree with each other and with CONTRACT section 4."""
     run_dir = Path(run_dir)
-    with open(run_dir / runlog.FRAMES_CSV, newline="") as handle:
+    with open(run_dir / schema.FRAMES_CSV, newline="") as handle:
         header = next(csv.reader(handle))
-    assert set(runlog.FRAME_COLUMNS) <= set(header)
-    assert header[:len(runlog.FRAME_COLUMNS)] == list(runlog.FRAME_COLUMNS)
-    with open(run_dir / runlog.SELECTION_CSV, newline="") as handle:
-        assert next(csv.reader(handle))[:len(runlog.SELECTION_COLUMNS)] == list(runlog.SELECTION_COLUMNS)
-    frame_rows = runlog.read_frames(run_dir)
-    selection = runlog.read_selection(run_dir)
+    assert set(schema.FRAME_COLUMNS) <= set(header)
+    assert header[:len(schema.FRAME_COLUMNS)] == list(schema.FRAME_COLUMNS)
+    with open(run_dir / schema.SELECTION_CSV, newline="") as handle:
+        assert next(csv.reader(handle))[:len(schema.SELECTION_COLUMNS)] == list(schema.SELECTION_COLUMNS)
+    frame_rows = run_files.read_frames(run_dir)
+    selection = run_files.read_selection(run_dir)
     assert [row["frame"] for row in frame_rows] == list(frames)
     assert {row["mode"] for row in frame_rows} == {mode}
     for row in frame_rows:
@@ -405,12 +407,12 @@ def check_run(run_dir, frames, mode, images="exr"):
         assert row["n_visible"] == sum(bool(s["visible"]) for s in rows)
         for s in rows:
             assert (s["reason"] == "") == bool(s["selected"])
-            assert s["reason"] in ("",) + runlog.REASONS
-    summary = runlog.read_summary(run_dir)
+            assert s["reason"] in ("",) + schema.REASONS
+    summary = run_files.read_summary(run_dir)
     assert summary["frame_count"] == len(frames) and summary["mode"] == mode
     assert summary["resolution"] == [WIDTH, HEIGHT]
     suffix = {"exr": ".exr", "png": ".png", "none": None}[images]
-    written = sorted((run_dir / runlog.FRAMES_DIR).iterdir())
+    written = sorted((run_dir / schema.FRAMES_DIR).iterdir())
     if suffix is None:
         assert written == []
     else:
@@ -484,9 +486,9 @@ def test_cancelled_replay_keeps_complete_frames_and_logs(scene, tmp_path):
                            should_stop=lambda: len(done) >= 4)
     assert result.cancelled and result.frames_done == 4
     check_run(tmp_path / "run", [1, 2, 3, 4], "HYBRID")
-    assert runlog.read_summary(tmp_path / "run")["cancelled"] is True
-    assert runlog.read_summary(tmp_path / "run")["partial"] is True
-    assert len(runlog.read_selection(tmp_path / "run")) == 4 * 5
+    assert run_files.read_summary(tmp_path / "run")["cancelled"] is True
+    assert run_files.read_summary(tmp_path / "run")["partial"] is True
+    assert len(run_files.read_selection(tmp_path / "run")) == 4 * 5
 
 
 def test_stepped_replay_cancelled_by_esc_keeps_what_was_rendered(scene, tmp_path):
@@ -528,7 +530,7 @@ def test_stepped_replay_closed_by_blender_leaves_the_scene_alone(scene, tmp_path
     run.step()
     run.finish(cancelled=True, restore_scene=False)
     assert scene.render.engine == "PHRT" and scene.frame_current == 1  # as the replay left it
-    assert runlog.read_summary(tmp_path / "run")["frame_count"] == 1
+    assert run_files.read_summary(tmp_path / "run")["frame_count"] == 1
 
 
 def test_stepped_replay_writes_what_replay_writes(scene, tmp_path):
@@ -538,13 +540,13 @@ def test_stepped_replay_writes_what_replay_writes(scene, tmp_path):
     while run.remaining:
         run.step()
     run.finish()
-    for name in (runlog.FRAMES_CSV, runlog.SELECTION_CSV):
+    for name in (schema.FRAMES_CSV, schema.SELECTION_CSV):
         with open(tmp_path / "blocking" / name) as a, open(tmp_path / "stepped" / name) as b:
             assert a.readline() == b.readline()  # same columns
     decisions = lambda run_dir: [(r["frame"], r["element"], r["visible"], r["selected"], r["reason"])  # noqa: E731
-                                 for r in runlog.read_selection(run_dir)]
+                                 for r in run_files.read_selection(run_dir)]
     assert decisions(tmp_path / "blocking") == decisions(tmp_path / "stepped")
-    blocking, stepped = (runlog.read_summary(tmp_path / d) for d in ("blocking", "stepped"))
+    blocking, stepped = (run_files.read_summary(tmp_path / d) for d in ("blocking", "stepped"))
     timing_free = {"total_ms", "stage_mean_ms", "predicted_trace_mean_ms", "machine", "mean_rays"}
     assert {k: v for k, v in blocking.items() if k not in timing_free} == \
            {k: v for k, v in stepped.items() if k not in timing_free}
@@ -562,7 +564,7 @@ def test_export_selection_log_round_trips_csv_and_json(scene, tmp_path):
 
     with open(tmp_path / "log.csv", newline="") as handle:
         reader = csv.DictReader(handle)
-        assert reader.fieldnames[:len(runlog.SELECTION_COLUMNS)] == list(runlog.SELECTION_COLUMNS)
+        assert reader.fieldnames[:len(schema.SELECTION_COLUMNS)] == list(schema.SELECTION_COLUMNS)
         from_csv = list(reader)
     from_json = json.loads((tmp_path / "log.JSON").read_text())
     assert len(from_csv) == len(from_json) == len(rows) == 5
@@ -580,7 +582,7 @@ def test_export_selection_log_of_a_run_folder(scene, tmp_path):
     bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "run.json"), run_dir=str(tmp_path / "run"))
     exported = json.loads((tmp_path / "run.json").read_text())
     assert [(r["frame"], r["element"]) for r in exported] == \
-           [(r["frame"], r["element"]) for r in runlog.read_selection(tmp_path / "run")]
+           [(r["frame"], r["element"]) for r in run_files.read_selection(tmp_path / "run")]
     with pytest.raises(RuntimeError, match="is not a run folder"):
         bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "x.csv"), run_dir=str(tmp_path))
 
@@ -714,5 +716,5 @@ def test_a_budget_given_as_an_override_holds_for_the_whole_replay(scene, tmp_pat
     camera = scene.camera
     result = replay.replay(scene, camera, (1, 3), "HYBRID", tmp_path / "run", images="none",
                            overrides={"budget_ms": 7.0})
-    budgets = {row["budget_ms"] for row in runlog.read_frames(result.run_dir)}
+    budgets = {row["budget_ms"] for row in run_files.read_frames(result.run_dir)}
     assert budgets == {7.0}

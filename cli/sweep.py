@@ -1,0 +1,147 @@
+"""Running the jobs of a sweep plan (``phrt_addon/runs/plan.py``) through Blender.
+
+:func:`execute_job` is the job function every executor calls: module level,
+given only the plan's path and a job id, so it can run in this process
+(``LocalExecutor``) or in a worker process elsewhere (``DaskExecutor``, from
+:func:`make_executor`).  It skips a complete job, writes the job's directory
+under a temporary name and renames it when the job is complete.  Bad input
+(a missing .blend or camera path) makes a failed outcome with its one-line
+message; anything else raises, and a Dask executor retries it.
+:func:`run_plan` runs a plan's jobs and writes the report of its runs.
+"""
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+
+from . import blender_process
+from ..phrt_addon.runs import executors
+from ..phrt_addon.report import oracle as oracle_module
+from ..phrt_addon.runs import plan as plan_module
+from ..engine.runs import oracle as oracle_engine
+from ..engine.runs import replay
+from ..engine.runs import camera_path
+
+
+# (scene, path, resolution) this process has rendered: its one-time costs are paid.
+_WARM = set()
+
+
+def _load(scene_name):
+    """Register PHRT and open ``scene_name`` (a .blend path or a sample scene name)."""
+    blender_process.blender()
+    with blender_process.quiet_stdout():
+        blender_process.load_scene(scene_name)
+
+
+def _open_scene(plan, job):
+    """Open the job's scene (on the main thread: Blender opens files only there); the first time in
+    this process, render one throw-away frame so that no run pays the process's one-time costs
+    (shader compiles, the driver's first draw, shadow maps, which stay cached) in its first frame
+    while the others do not."""
+    import tempfile
+
+    scene_name, label, path = plan.target(job)
+    executors.on_main_thread(_load, scene_name)
+    import bpy
+    scene = bpy.context.scene
+    camera = camera_path.find_path(scene, path)
+    key = (scene_name, path, tuple(plan.resolution))
+    if key not in _WARM:
+        with tempfile.TemporaryDirectory(prefix="phrt-warm-up-") as folder, blender_process.quiet_stdout():
+            replay.replay(scene, camera, (plan.frames[0], plan.frames[0]), "RAYTRACE", Path(folder) / "run",
+                          images="none", resolution=tuple(plan.resolution), scene_label=label)
+        _WARM.add(key)
+    return scene, camera
+
+
+def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
+    """Run job ``job_id`` of the plan at ``plan_path`` unless it is complete."""
+    plan_path = Path(plan_path)
+    folder = plan_path.parent
+    plan = plan_module.read_plan(plan_path)
+    job = plan.job(job_id)
+    if plan_module.job_is_complete(plan, folder, job):
+        return plan_module.JobOutcome(job.id, "skipped", message="complete")
+    begin = time.perf_counter()
+    for stale in folder.glob(f".{job.id}.partial-*"):  # what an attempt that died left
+        shutil.rmtree(stale, ignore_errors=True)
+    partial = plan_module.partial_dir(folder, job)
+    try:
+        scene, camera = _open_scene(plan, job)
+        try:
+            with blender_process.quiet_stdout():
+                message = _run(plan, folder, job, scene, camera, partial)
+            plan_module.publish(partial, folder / job.id)
+        except BaseException:
+            shutil.rmtree(partial, ignore_errors=True)
+            raise
+    except (blender_process.UserError, camera_path.ReplayError) as error:  # bad input: retrying cannot help
+        return plan_module.JobOutcome(job.id, "failed", time.perf_counter() - begin,
+                                      str(error).strip().splitlines()[0])
+    return plan_module.JobOutcome(job.id, "done", time.perf_counter() - begin, message)
+
+
+def _run(plan, folder, job, scene, camera, partial) -> str:
+    """Write the job's directory at ``partial``; returns a one-line account."""
+    frames = (plan.frames[0], plan.frames[1])
+    resolution = tuple(plan.resolution)
+    _, label, path = plan.target(job)
+    if job.kind == "run":
+        references = [dependency for dependency in job.depends_on
+                      if plan.job(dependency).mode in ("RASTER", "RAYTRACE")]
+        if not references:
+            references = [plan_module.run_id(label, path, mode) for mode in ("RASTER", "RAYTRACE")]
+        result = replay.replay(scene, camera, frames, job.mode, partial, images="exr", resolution=resolution,
+                               scene_label=label, budget_at=job.budget_at, budget_ms=job.budget_ms,
+                               budget_search_dirs=[folder / reference for reference in references],
+                               overrides=job.overrides)
+        if result.cancelled:
+            raise RuntimeError(f"run {job.id} stopped after {result.frames_done} frames")
+        message = f"{result.frames_done} frames, mean {result.summary['total_ms']['mean']:.0f} ms"
+        if job.budget_at is not None:
+            message += f", budget {result.summary['budget_ms']:.0f} ms"
+    elif job.kind == "oracle":
+        hybrids = {dependency: folder / dependency for dependency in job.depends_on
+                   if plan.job(dependency).mode == "HYBRID"}
+        reference = next(folder / dependency for dependency in job.depends_on
+                         if plan.job(dependency).mode == "RAYTRACE")
+        info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, every=plan.oracle_every,
+                                        resolution=resolution)
+        message = f"{len(info['frames'])} sampled frames, {len(hybrids)} runs"
+    else:
+        raise ValueError(f"unknown job kind '{job.kind}'")
+    return message
+
+
+def make_executor(workers=None, scheduler=None, **options):
+    """``plan.LocalExecutor`` by default; a ``DaskExecutor`` on a LocalCluster of ``workers`` processes
+    or on the cluster at ``scheduler``, whose workers get PHRT set up (``cli/dask_worker.py``).
+    ``executors.ExecutorError`` when both are given, or Dask is missing."""
+    if workers is None and scheduler is None:
+        return executors.make_executor()
+    executors.make_executor(workers, scheduler)  # checks the options before importing Dask
+    executors.import_distributed()
+    from .dask_worker import BlenderWorker
+    return executors.make_executor(workers, scheduler, plugins=[BlenderWorker()], **options)
+
+
+def run_plan(plan_path, plan, executor, on_outcome=None):
+    """Run the plan's jobs with ``executor`` (complete ones are skipped) and write the report of its
+    complete runs to ``DIR/report/``, failed jobs listed with their one-line messages.
+
+    Returns ``(outcomes, report files or None, why there is no report or None)``."""
+    from ..phrt_addon import report
+    folder = Path(plan_path).parent
+    outcomes = executor.run(plan_path, plan, execute_job, on_outcome=on_outcome)
+    complete = [folder / job.id for job in plan.runs if plan_module.run_is_complete(folder / job.id, plan)]
+    if not complete:
+        return outcomes, None, "no run is complete"
+    failures = [(outcome.job_id, outcome.message) for outcome in outcomes if outcome.status == "failed"]
+    try:
+        files = report.build_report(complete, out_dir=folder / plan_module.REPORT_DIR,
+                                    oracle_dir=folder / oracle_module.ORACLE_DIR, failures=failures)
+    except ValueError as error:
+        return outcomes, None, str(error).splitlines()[0]
+    return outcomes, files, None

@@ -1,0 +1,172 @@
+"""G-buffer: what the raster pass leaves for shading, selection and tracing.
+
+Two layers, both (h, w) images with row 0 at the bottom (Blender's pixel order):
+``opaque`` holds the nearest opaque surface, ``transparent`` the nearest
+transparent surface in front of it (glass, water, alpha-blended cards).  The
+raster pass fills them on the GPU (``engine/raster.py``); tests may build them
+by hand.
+
+Positions are stored relative to ``origin`` (the camera position, float64) so
+that float32 keeps its precision at huge world coordinates.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class GBufferLayer:
+    covered: np.ndarray  # (h, w) bool: a surface was drawn here
+    position: np.ndarray  # (h, w, 3) float32, world position minus GBuffer.origin
+    normal: np.ndarray  # (h, w, 3) float32 unit shading normal, facing the camera
+    roughness: np.ndarray  # (h, w) float32
+    albedo: np.ndarray  # (h, w, 3) float32 base colour (texture applied)
+    metallic: np.ndarray  # (h, w) float32
+    material: np.ndarray  # (h, w) int32 material index, -1 where not covered
+    element: np.ndarray  # (h, w) int32 element index, -1 where none
+    # (h, w, 3) float32 unit face (geometric) normal, when the raster pass provides it;
+    # otherwise ``geometric_normals`` reconstructs it from the positions.
+    geometric_normal: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, width: int, height: int) -> "GBufferLayer":
+        return cls(
+            covered=np.zeros((height, width), bool),
+            position=np.zeros((height, width, 3), np.float32),
+            normal=np.zeros((height, width, 3), np.float32),
+            roughness=np.zeros((height, width), np.float32),
+            albedo=np.zeros((height, width, 3), np.float32),
+            metallic=np.zeros((height, width), np.float32),
+            material=np.full((height, width), -1, np.int32),
+            element=np.full((height, width), -1, np.int32),
+        )
+
+
+@dataclass
+class GBuffer:
+    opaque: GBufferLayer
+    transparent: GBufferLayer
+    origin: np.ndarray  # (3,) float64 world position the layers' positions are relative to
+    view_depth: np.ndarray  # (h, w) float32 distance along the camera axis of the front surface; inf = background
+
+    @property
+    def height(self) -> int:
+        return self.opaque.covered.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.opaque.covered.shape[1]
+
+    def front_element(self) -> np.ndarray:
+        """Element index of the front-most surface of each pixel (transparent over opaque)."""
+        return np.where(self.transparent.covered, self.transparent.element, self.opaque.element)
+
+    def front_normal(self) -> np.ndarray:
+        return np.where(self.transparent.covered[..., None], self.transparent.normal, self.opaque.normal)
+
+
+def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np.ndarray) -> np.ndarray:
+    """Unit face normals at the layer's pixels ``flat`` (flat indices), facing the camera:
+    where secondary rays leave from (``phrt_addon/trace/tracer.py``: offsets along the geometric
+    normal, not the interpolated one, which on a coarse smooth mesh can point below the
+    surface).
+
+    The layer's own ``geometric_normal`` when the raster pass wrote one; otherwise the cross
+    product of the position differences to the neighbouring pixels of the same surface
+    (same material and element), taking on each axis the side with the smaller difference
+    (the one least likely to straddle an edge).  Where no such pair exists, or the result
+    disagrees with the shading normal's side, the direction back to the camera is used: a
+    point seen by the camera is always free on that side.  ``view_directions`` (n, 3):
+    unit directions from the camera to the points."""
+    flat = np.asarray(flat, np.int64)
+    towards_camera = -np.asarray(view_directions, np.float64)
+    height, width = layer.covered.shape
+    if layer.geometric_normal is not None:
+        normal = layer.geometric_normal.reshape(-1, 3)[flat].astype(np.float64)
+    else:
+        position = layer.position.reshape(-1, 3)
+        covered = layer.covered.ravel()
+        # The same surface: same material and element (read only at the pixels compared, not
+        # built for the whole frame: a frame with few rays asks for few pixels).
+        material, element = layer.material.ravel(), layer.element.ravel()
+        material_here, element_here = material[flat], element[flat]
+        ys, xs = np.divmod(flat, width)
+        here = position[flat].astype(np.float64)
+
+        def same_surface(index):
+            return (material[index] == material_here) & (element[index] == element_here)
+
+        def difference(step, coordinate, limit):
+            forward_index = np.minimum(flat + step, covered.size - 1)
+            backward_index = np.maximum(flat - step, 0)
+            forward_ok = (coordinate + 1 < limit) & covered[forward_index] & same_surface(forward_index)
+            backward_ok = (coordinate > 0) & covered[backward_index] & same_surface(backward_index)
+            forward = position[forward_index].astype(np.float64) - here
+            backward = here - position[backward_index].astype(np.float64)
+            forward_length = np.where(forward_ok, np.einsum("ij,ij->i", forward, forward), np.inf)
+            backward_length = np.where(backward_ok, np.einsum("ij,ij->i", backward, backward), np.inf)
+            use_forward = forward_length <= backward_length
+            return np.where(use_forward[:, None], forward, backward), forward_ok | backward_ok
+
+        along_x, ok_x = difference(1, xs, width)
+        along_y, ok_y = difference(width, ys, height)
+        normal = np.cross(along_x, along_y)
+        length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
+        valid = ok_x & ok_y & (length > 0) & np.isfinite(length)
+        normal = np.where(valid[:, None], normal / np.where(valid, length, 1.0)[:, None], 0.0)
+    # Face the camera; fall back to the camera direction where the normal is unusable.
+    side = np.einsum("ij,ij->i", normal, towards_camera)
+    normal = np.where((side < 0)[:, None], -normal, normal)
+    shading_normal = layer.normal.reshape(-1, 3)[flat].astype(np.float64)
+    shading_side = np.einsum("ij,ij->i", shading_normal, towards_camera)
+    shading_normal = np.where((shading_side < 0)[:, None], -shading_normal, shading_normal)
+    usable = (np.abs(side) > 1e-6) & (np.einsum("ij,ij->i", normal, shading_normal) > 0) & np.all(np.isfinite(normal),
+                                                                                                  axis=1)
+    return np.where(usable[:, None], normal, towards_camera)
+
+
+def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: np.ndarray):
+    """Per element, from the element-id image: pixel count, pixel centroid in NDC
+    (-1..1) and median view depth of its pixels.
+
+    Whole-array numpy (bincount); elements with no pixels get count 0, centroid
+    (0, 0) and depth inf.  This is the exact "area in the view plane" of the paper's
+    A, measured rather than estimated from bounds."""
+    height, width = element_image.shape
+    # Every pixel counted once; no element (or an id beyond the list) goes to bin n.
+    image = np.asarray(element_image)
+    ids = np.where((image >= 0) & (image < n_elements), image, n_elements).astype(np.intp, copy=False)
+    size = n_elements + 1
+    flat = ids.ravel()
+    if (height + width) * size <= 4 * height * width:
+        # Pixels per (row, element) and per (column, element): integer bincounts, no weights.
+        per_row = np.bincount((ids + np.arange(height)[:, None] * size).ravel(), minlength=height * size)
+        per_row = per_row.reshape(height, size)[:, :n_elements]
+        per_column = np.bincount((ids + np.arange(width)[None, :] * size).ravel(), minlength=width * size)
+        per_column = per_column.reshape(width, size)[:, :n_elements]
+        counts = per_row.sum(axis=0).astype(np.int64)
+        column_sum = np.arange(width, dtype=np.float64) @ per_column
+        row_sum = np.arange(height, dtype=np.float64) @ per_row
+    else:  # more elements than such tables should hold: pixel-weighted bincounts
+        counts = np.bincount(flat, minlength=size)[:n_elements].astype(np.int64)
+        column_sum = np.bincount(flat, weights=np.tile(np.arange(width, dtype=np.float64), height),
+                                 minlength=size)[:n_elements]
+        row_sum = np.bincount(flat, weights=np.repeat(np.arange(height, dtype=np.float64), width),
+                              minlength=size)[:n_elements]
+    safe = np.maximum(counts, 1)
+    has_pixels = counts > 0
+    # Mean pixel column and row, then to NDC (affine: the mean of the NDC is the NDC of the mean).
+    mean_x = column_sum / safe
+    mean_y = row_sum / safe
+    centre = np.zeros((n_elements, 2))
+    centre[has_pixels, 0] = ((mean_x + 0.5) / width * 2.0 - 1.0)[has_pixels]
+    centre[has_pixels, 1] = ((mean_y + 0.5) / height * 2.0 - 1.0)[has_pixels]
+    # Mean depth (bincount) rather than the median: O(n) and stable for convex-ish elements.
+    depth_values = np.asarray(view_depth).ravel()
+    finite = np.isfinite(depth_values)
+    depth_sum = np.bincount(flat, weights=np.where(finite, depth_values, 0.0), minlength=size)[:n_elements]
+    depth_count = np.bincount(flat[finite], minlength=size)[:n_elements]
+    depth = np.where(depth_count > 0, depth_sum / np.maximum(depth_count, 1), np.inf)
+    return counts, centre, depth

@@ -1,0 +1,298 @@
+"""The oracle selection and the heuristic's regret (outside every timed region).
+
+On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
+(``engine/runs/oracle.py`` renders, this module decides and keeps the books):
+
+1. renders the frame with nothing traced (the raster image of the frame) and
+   with each visible candidate traced alone, and measures against the
+   reference (raytrace) run's image of the same frame
+   - its **benefit**: mean LDR-FLIP of the raster frame minus that of the frame
+     with the element traced alone (its own error drop), and
+   - its **cost**: the trace stage's measured ms when traced alone (without
+     one-time Embree uploads), less the trace stage's fixed part, which a frame
+     pays once whatever it traces (``overhead_ms``: how much the candidates
+     traced alone cost more, summed, than all of them traced together, per
+     extra trace); a subset costs its elements' costs plus that fixed part;
+2. for every hybrid run, chooses the subset of candidates with the largest
+   summed benefit whose summed cost fits the same time as the heuristic had:
+   the run's own time left T at that frame (``time_left_ms`` in its
+   ``frames.csv``), or what the heuristic's own choice costs when it overran T
+   (measured the same way, so the heuristic's choice is always one the oracle
+   could make): an exact 0/1 knapsack on measured numbers (:func:`knapsack`,
+   branch and bound);
+3. renders that subset and measures its error: ``regret = error(heuristic) -
+   error(oracle)``, the heuristic's error being that of the run's own image.
+
+Benefits below ``MIN_BENEFIT`` are raised to it: tracing an element never moves
+the frame away from the reference, which traces it too, so a measured drop at
+or below zero is FLIP noise (and a budget that covers every candidate then
+traces them all, as the reference does).  Benefits add up only
+approximately (a reflection may show another traced element), which is why the
+chosen subset is rendered and measured rather than its predicted error
+trusted; the regret is therefore >= 0 up to that interaction and FLIP noise.
+
+Files in the oracle folder (``ORACLE_DIR`` of a sweep): ``candidates.csv`` (one
+row per sampled frame and candidate), ``regret.csv`` (one row per hybrid run
+and sampled frame) and ``oracle.json`` (settings, per-run means, and the hash
+of each run's ``summary.json`` it was computed from, so a redone run makes it
+stale).  Plain Python + numpy, no ``bpy``.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..runs import run_log
+from .. import schema
+
+ORACLE_DIR = "oracle"
+ORACLE_JSON = "oracle.json"
+CANDIDATES_CSV = "candidates.csv"
+REGRET_CSV = "regret.csv"
+DEFAULT_EVERY = 8
+MIN_BENEFIT = 1e-6
+CANDIDATE_COLUMNS = ("frame", "element", "area_px", "cost_ms", "overhead_ms", "flip_alone", "flip_raster", "benefit")
+REGRET_COLUMNS = ("run", "frame", "time_left_ms", "capacity_ms", "heuristic_flip", "oracle_flip", "regret", "heuristic",
+                  "oracle", "oracle_only", "heuristic_only", "oracle_cost_ms", "heuristic_cost_ms",
+                  "oracle_benefit", "heuristic_benefit")
+# Knapsack search nodes before giving up exactness (never reached with a frame's candidates).
+MAX_NODES = 2_000_000
+
+
+def sampled_frames(frames, every: int = DEFAULT_EVERY) -> list[int]:
+    """Every ``every``-th of ``frames`` (sorted): the k-th, 2k-th, ... frame of the run, so the
+    first frame (cold cost model, one-time set-up) is judged only in runs shorter than k."""
+    if every < 1:
+        raise ValueError(f"oracle sampling must be every k >= 1 frames, not {every}")
+    ordered = sorted(set(int(frame) for frame in frames))
+    return ordered[every - 1::every] or ordered[-1:]
+
+
+def knapsack(values, costs, capacity: float) -> np.ndarray:
+    """Exact 0/1 knapsack: the mask of items maximising the summed ``values`` with summed
+    ``costs`` <= ``capacity`` (floats).  Depth-first branch and bound in value-per-cost
+    order with the fractional (Dantzig) bound; among equal values the cheaper set and then
+    the earlier items win.  Items with cost <= 0 and value > 0 are always taken."""
+    values = np.nan_to_num(np.asarray(values, dtype=np.float64), nan=0.0)
+    costs = np.nan_to_num(np.asarray(costs, dtype=np.float64), nan=np.inf, posinf=np.inf)
+    n = len(values)
+    chosen = np.zeros(n, dtype=bool)
+    capacity = float(capacity) if np.isfinite(capacity) else np.inf
+    if n == 0 or capacity < 0:
+        return chosen
+    free = (costs <= 0) & (values > 0)
+    chosen[free] = True
+    useful = np.flatnonzero(~free & (values > 0) & (costs <= capacity))
+    if len(useful) == 0:
+        return chosen
+    if np.isinf(capacity) or costs[useful].sum() <= capacity:
+        chosen[useful] = True
+        return chosen
+    ratio = values[useful] / costs[useful]
+    order = useful[np.lexsort((useful, costs[useful], -ratio))]
+    item_values, item_costs = values[order].tolist(), costs[order].tolist()
+    m = len(order)
+    best = {"value": -1.0, "cost": np.inf, "set": []}
+    current = []
+    nodes = 0
+
+    def bound(index, room, value):
+        for position in range(index, m):
+            if item_costs[position] <= room:
+                room -= item_costs[position]
+                value += item_values[position]
+            else:
+                return value + item_values[position] * room / item_costs[position]
+        return value
+
+    def search(index, room, value, spent):
+        nonlocal nodes
+        nodes += 1
+        if value > best["value"] + 1e-15 or (abs(value - best["value"]) <= 1e-15 and spent < best["cost"]):
+            best.update(value=value, cost=spent, set=list(current))
+        if index == m or nodes > MAX_NODES:
+            return
+        if bound(index, room, value) <= best["value"] + 1e-15:
+            return
+        if item_costs[index] <= room:
+            current.append(index)
+            search(index + 1, room - item_costs[index], value + item_values[index], spent + item_costs[index])
+            current.pop()
+        search(index + 1, room, value, spent)
+
+    search(0, capacity, 0.0, 0.0)
+    chosen[order[best["set"]]] = True
+    return chosen
+
+
+@dataclass
+class FrameCandidates:
+    """The measured candidates of one sampled frame."""
+
+    frame: int
+    names: list
+    cost_ms: np.ndarray
+    benefit: np.ndarray
+    flip_raster: float
+    flip_alone: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    area_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    overhead_ms: float = 0.0
+
+    def capacity(self, time_left_ms: float, heuristic_set) -> float:
+        """The time the oracle may fill: T, or the heuristic's own choice's cost if it overran T."""
+        return max(float(time_left_ms), self.totals(heuristic_set)[0])
+
+    def choose(self, capacity_ms: float) -> frozenset:
+        """The oracle's subset for ``capacity_ms`` of tracing (the fixed part paid once)."""
+        room = float(capacity_ms) - self.overhead_ms
+        if room < 0:
+            return frozenset()
+        mask = knapsack(np.maximum(self.benefit, MIN_BENEFIT), self.cost_ms, room)
+        return frozenset(name for name, taken in zip(self.names, mask.tolist()) if taken)
+
+    def totals(self, names) -> tuple[float, float]:
+        """(cost ms, summed benefit) of a subset (names outside the candidates count 0); a
+        non-empty subset pays the fixed part once."""
+        index = {name: position for position, name in enumerate(self.names)}
+        rows = [index[name] for name in names if name in index]
+        fixed = self.overhead_ms if rows else 0.0
+        return (float(np.sum(self.cost_ms[rows])) + fixed,
+                float(np.sum(np.maximum(self.benefit[rows], MIN_BENEFIT))))
+
+
+def trace_overhead_ms(alone_ms, together_ms) -> float:
+    """The trace stage's fixed part from the costs of n candidates traced alone and of all of
+    them together: (sum alone - together) / (n - 1), within [0, the cheapest alone]."""
+    alone = np.asarray(alone_ms, dtype=np.float64)
+    if len(alone) < 2 or not np.isfinite(together_ms):
+        return 0.0
+    return float(np.clip((alone.sum() - float(together_ms)) / (len(alone) - 1), 0.0, alone.min()))
+
+
+def summary_hash(run_dir) -> str | None:
+    """Hash of a run's ``summary.json`` (None when missing): what the oracle was computed from."""
+    path = Path(run_dir) / schema.SUMMARY_JSON
+    if not path.is_file():
+        return None
+    return hashlib.blake2b(path.read_bytes(), digest_size=12).hexdigest()
+
+
+def _names(text) -> list:
+    return [name for name in str(text or "").split(";") if name]
+
+
+def _joined(names) -> str:
+    return ";".join(sorted(names))
+
+
+def write_csv(path, columns, rows):
+    """Rows (dicts) as a CSV through a temporary file (numbers as in the run logs)."""
+    path = Path(path)
+    temporary = path.with_name(path.name + ".tmp")
+    with open(temporary, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(columns)
+        for row in rows:
+            writer.writerow([run_log.format_value(row.get(key)) for key in columns])
+    os.replace(temporary, path)
+
+
+def read_csv(path) -> list:
+    with open(path, newline="", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
+@dataclass
+class OracleResults:
+    """An oracle folder read back for the report."""
+
+    folder: Path
+    info: dict
+    regret_rows: list
+    candidate_rows: list
+
+    def runs(self) -> dict:
+        """{run label: {'mean_regret', 'frames', 'mean_heuristic_flip', 'mean_oracle_flip'}}."""
+        return self.info.get("runs", {})
+
+    def rows_of(self, run_label) -> list:
+        return [row for row in self.regret_rows if row["run"] == run_label]
+
+    def is_current_for(self, run_label, run_dir) -> bool:
+        entry = self.runs().get(run_label)
+        return entry is not None and entry.get("summary_hash") == summary_hash(run_dir)
+
+
+def read_results(folder) -> OracleResults | None:
+    """The oracle folder's contents, or None when it has not been (completely) written."""
+    folder = Path(folder)
+    info_path = folder / ORACLE_JSON
+    if not info_path.is_file():
+        return None
+    info = json.loads(info_path.read_text(encoding="utf-8"))
+    regret_rows = []
+    for row in read_csv(folder / REGRET_CSV):
+        parsed = dict(row)
+        for key in ("frame",):
+            parsed[key] = int(row[key])
+        for key in ("time_left_ms", "capacity_ms", "heuristic_flip", "oracle_flip", "regret", "oracle_cost_ms",
+                    "heuristic_cost_ms", "oracle_benefit", "heuristic_benefit"):
+            parsed[key] = float(row[key]) if row[key] != "" else None
+        for key in ("heuristic", "oracle", "oracle_only", "heuristic_only"):
+            parsed[key] = _names(row[key])
+        regret_rows.append(parsed)
+    candidate_rows = read_csv(folder / CANDIDATES_CSV)
+    return OracleResults(folder=folder, info=info, regret_rows=regret_rows, candidate_rows=candidate_rows)
+
+
+def regret_row(run_label, frame, time_left_ms, heuristic_set, heuristic_flip, oracle_set, oracle_flip,
+               candidates: FrameCandidates) -> dict:
+    """One row of ``regret.csv``."""
+    oracle_cost, oracle_benefit = candidates.totals(oracle_set)
+    heuristic_cost, heuristic_benefit = candidates.totals(heuristic_set)
+    return {"run": run_label, "frame": frame, "time_left_ms": time_left_ms,
+            "capacity_ms": candidates.capacity(time_left_ms, heuristic_set), "heuristic_flip": heuristic_flip,
+            "oracle_flip": oracle_flip, "regret": heuristic_flip - oracle_flip,
+            "heuristic": _joined(heuristic_set), "oracle": _joined(oracle_set),
+            "oracle_only": _joined(set(oracle_set) - set(heuristic_set)),
+            "heuristic_only": _joined(set(heuristic_set) - set(oracle_set)),
+            "oracle_cost_ms": oracle_cost, "heuristic_cost_ms": heuristic_cost,
+            "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
+
+
+def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note=""):
+    """Write the oracle folder's three files (``oracle.json`` last: it marks completion)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
+        {"frame": item.frame, "element": name, "area_px": int(item.area_px[index]) if len(item.area_px) else None,
+         "cost_ms": float(item.cost_ms[index]), "overhead_ms": item.overhead_ms,
+         "flip_alone": float(item.flip_alone[index]) if len(item.flip_alone) else None,
+         "flip_raster": item.flip_raster, "benefit": float(item.benefit[index])}
+        for item in candidates for index, name in enumerate(item.names)])
+    write_csv(folder / REGRET_CSV, REGRET_COLUMNS, regret_rows)
+    runs = {}
+    for label, run_dir in run_dirs.items():
+        rows = [row for row in regret_rows if row["run"] == label]
+        runs[label] = {
+            "summary_hash": summary_hash(run_dir), "frames": len(rows),
+            "mean_regret": float(np.mean([row["regret"] for row in rows])) if rows else None,
+            "mean_heuristic_flip": float(np.mean([row["heuristic_flip"] for row in rows])) if rows else None,
+            "mean_oracle_flip": float(np.mean([row["oracle_flip"] for row in rows])) if rows else None,
+            "frames_oracle_differs": sum(1 for row in rows if row["oracle"] != row["heuristic"]),
+        }
+    info = run_log._round_json(run_log._json_safe({
+        "every": every, "frames": list(frames), "runs": runs,
+        "min_benefit": MIN_BENEFIT, "note": note or
+        "computed after the runs, outside every timed region: each candidate traced alone against the "
+        "reference, an exact knapsack on measured benefit and cost within each run's own time left"}))
+    temporary = folder / (ORACLE_JSON + ".tmp")
+    temporary.write_text(json.dumps(info, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    os.replace(temporary, folder / ORACLE_JSON)
+    return info

@@ -1,0 +1,158 @@
+"""Expected benefit of ray tracing an element: the error-aware relevance (``relevance = 'error'``).
+
+The paper's relevance knows where an element is (V = A * P / D) but not how
+wrong its raster version looks: a mirror facing a bright wall and a matte cube
+of the same size get the same V, while only the mirror changes when traced.
+This module keeps, per element, a running estimate of how much its traced
+image differs from its raster image, per pixel of the element:
+
+- **measured** on frames where the element was traced (:func:`measure_differences`):
+  the GPU composite evaluates every traced pixel twice, with the traced terms
+  and with the raster ones (environment reflection, straight-through
+  transparency, shadow-map visibility), and writes the difference beside the
+  image; reflections and refractions are charged to the element traced at the
+  pixel, shadow changes to the selected casters whose shadow region holds the
+  receiving pixel.  Differences are in linear luminance clipped to [0, 1] per
+  pixel (what an LDR display and LDR-FLIP can see), summed and divided by the
+  element's own pixel count;
+- **a prior** before its first traced frame (:func:`prior_per_pixel`), from the
+  materials under its pixels and its tagged effects: the specular reflectance
+  times the mirror share of the reflection (the tracer's roughness blend) and
+  the transmission, each times a typical contrast between the traced term and
+  what raster puts there, plus a small constant for shadows.
+
+:class:`BenefitModel` holds the estimates for a replay (one per
+``FrameRenderer``): the first measurement replaces the prior, later ones are
+averaged exponentially.  Plain numpy, no ``bpy``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import shading
+
+# Typical |traced - raster| of a fully replaced term (LDR): a traced reflection against the
+# uniform environment colour raster puts there; a refraction bends the view of what raster
+# shows straight through, which differs less.
+REFLECTION_CONTRAST = 0.5
+REFRACTION_CONTRAST = 0.2
+# Prior per pixel of a shadow caster: shadow maps and rays mostly agree but at the edges.
+SHADOW_PRIOR = 0.02
+# Weight of a new measurement in the running estimate.
+SMOOTHING = 0.3
+# Rec. 709 luminance weights.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+# The largest benefit per pixel (a shadow caster's difference lands outside its own pixels).
+MAX_BENEFIT = 1e3
+# The prior reads every PRIOR_STEP-th covered pixel (an estimate: a quarter of the pixels is plenty).
+PRIOR_STEP = 4
+
+
+def prior_per_pixel(layers, n_elements, reflections, refractions, shadows, materials) -> np.ndarray:
+    """Expected difference per pixel of each element from the materials under its pixels.
+
+    ``layers`` are the frame's read-back ``frame.LayerPixels`` (per layer: ``element``,
+    ``material`` and ``roughness`` per covered pixel), or None when nothing was read back
+    (then no element is visible and every prior is 0); ``reflections``, ``refractions``,
+    ``shadows`` are the elements' effect flags; ``materials`` the ``shading.MaterialTable``.
+    """
+    from ..trace.tracer import reflection_blend
+
+    total = np.zeros(n_elements)
+    count = np.zeros(n_elements)
+    if layers is None:
+        return total
+    flags = [np.asarray(flag, bool) for flag in (reflections, refractions, shadows)]
+    f0 = shading.specular_f0(materials.base_color, materials.metallic, materials.ior) @ LUMINANCE
+    transmissive = materials.transmission * (1.0 - materials.metallic)
+    for pixels in layers.values():
+        element = np.asarray(pixels.element)
+        ours = np.flatnonzero((element >= 0) & (element < n_elements))[::PRIOR_STEP]
+        if len(ours) == 0:
+            continue
+        element = element[ours]
+        material = pixels.material[ours]
+        expected = (flags[0][element] * f0[material] * reflection_blend(pixels.roughness[ours]) * REFLECTION_CONTRAST
+                    + flags[1][element] * transmissive[material] * REFRACTION_CONTRAST
+                    + flags[2][element] * SHADOW_PRIOR)
+        total += np.bincount(element, weights=expected, minlength=n_elements)
+        count += np.bincount(element, minlength=n_elements)
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
+
+
+def measure_differences(snapshot, layers, change, traced, selected, element_bounds) -> np.ndarray:
+    """Summed per-pixel |traced - raster| (clipped linear luminance) attributable to each element.
+
+    ``change`` is the GPU's measurement (``RasterFrame.traced_change``): x, what the traced
+    reflections and refractions changed at their own pixels, charged to the element traced
+    there (the transparent layer's where both were); y, what the traced shadows changed on
+    whatever surface receives them, shared between the selected casters whose shadow region
+    holds the pixel.  ``traced`` is the frame's ``frame.TracedTerms``.
+    """
+    from ..trace.shadow_region import ShadowRegionIndex
+
+    n = len(snapshot.elements)
+    difference = np.zeros(n)
+    flat_change = np.asarray(change, np.float64).reshape(-1, change.shape[-1])
+    owner = np.full(len(flat_change), -1, np.int64)
+    for layer_name in ("opaque", "transparent"):  # the transparent layer's element wins
+        pixels = layers[layer_name]
+        element_at = np.full(len(flat_change), -1, np.int64)
+        element_at[pixels.flat] = pixels.element
+        traced_pixels = [traced.reflection[layer_name][0]] if layer_name in traced.reflection else []
+        if layer_name == "transparent" and traced.refraction is not None:
+            traced_pixels.append(traced.refraction[0])
+        for where in traced_pixels:
+            owner[where] = element_at[where]
+    mine = np.flatnonzero((owner >= 0) & (owner < n))
+    difference += np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)[:n]
+    casters = [index for index in np.flatnonzero(selected)
+               if snapshot.elements[index].shadows and element_bounds[index] is not None]
+    if casters:
+        shadow_change = flat_change[:, 1]
+        charged = np.zeros(len(flat_change), bool)
+        for (layer_name, light_index), (where, _) in traced.shadow_visibility.items():
+            where = where[(shadow_change[where] > 0) & ~charged[where]]
+            if len(where) == 0:
+                continue
+            charged[where] = True  # a pixel's change (all lights) is shared once
+            pixels = layers[layer_name]
+            position = np.full((len(flat_change), 3), np.nan)
+            position[pixels.flat] = pixels.world()
+            index = ShadowRegionIndex(snapshot.lights[light_index], position[where])
+            owners = np.stack([index.region(element_bounds[caster]) for caster in casters])
+            shares = owners.sum(axis=0)
+            weights = np.where(shares > 0, shadow_change[where] / np.maximum(shares, 1), 0.0)
+            difference[casters] += owners.astype(np.float64) @ weights
+    return difference
+
+
+class BenefitModel:
+    """Per element (by name): the running estimate of its traced-vs-raster difference per pixel."""
+
+    def __init__(self, smoothing: float = SMOOTHING):
+        self.smoothing = float(smoothing)
+        self.estimates: dict[str, float] = {}
+        self.observations: dict[str, int] = {}
+
+    def benefit(self, names, prior) -> np.ndarray:
+        """Per element: the learned estimate once measured, else ``prior``."""
+        prior = np.nan_to_num(np.asarray(prior, dtype=np.float64), nan=0.0, posinf=MAX_BENEFIT, neginf=0.0)
+        learned = self.estimates.get
+        values = np.fromiter((learned(name, -1.0) for name in names), dtype=np.float64, count=len(names))
+        return np.clip(np.where(values >= 0, values, prior), 0.0, MAX_BENEFIT)
+
+    def observe(self, names, traced, difference, area_px) -> None:
+        """Learn from one frame: ``difference`` summed per element (``measure_differences``),
+        for the elements ``traced`` with at least one pixel."""
+        traced = np.asarray(traced, bool) & (np.asarray(area_px) > 0)
+        per_pixel = np.asarray(difference, np.float64) / np.maximum(np.asarray(area_px, np.float64), 1.0)
+        per_pixel = np.clip(np.nan_to_num(per_pixel, nan=0.0, posinf=MAX_BENEFIT), 0.0, MAX_BENEFIT)
+        for index in np.flatnonzero(traced).tolist():
+            name = names[index]
+            value = float(per_pixel[index])
+            if name in self.estimates:
+                self.estimates[name] += self.smoothing * (value - self.estimates[name])
+            else:
+                self.estimates[name] = value
+            self.observations[name] = self.observations.get(name, 0) + 1

@@ -1,0 +1,1 @@
+"""The trace stage: which pixels get which rays, the Embree scenes, the radiance of hits, shadow regions."""

@@ -1,0 +1,284 @@
+"""Shadow regions: which pixels a caster can shadow, per light.
+
+For each light, the pixels whose segment to the light may cross an element's
+bounds (a light-space cylinder for the sun, a cone for local lights) get traced
+visibility when that element is selected as a shadow caster; elsewhere the shadow
+map stays.  The same regions estimate each element's shadow-ray count for the
+cost model.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import shading
+from ..scene.snapshot import transform_points
+
+
+class ElementBounds:
+    """World-space (min, max) of each element of a snapshot.  Local bounds are computed once
+    per mesh content (bounded cache) and moved by the world matrix every frame."""
+
+    CACHE_LIMIT = 4096
+
+    def __init__(self):
+        self._local = {}  # geometry key -> {element: (low, high)} in local space
+
+    def _local_bounds(self, mesh):
+        cached = self._local.get(mesh.geometry_key)
+        if cached is None:
+            cached = {}
+            corners = mesh.positions[mesh.triangles]  # (T, 3, 3)
+            low = corners.min(axis=1)
+            high = corners.max(axis=1)
+            for element in np.unique(mesh.tri_element[mesh.tri_element >= 0]):
+                chosen = mesh.tri_element == element
+                cached[int(element)] = (low[chosen].min(axis=0).astype(np.float64),
+                                        high[chosen].max(axis=0).astype(np.float64))
+            if len(self._local) >= self.CACHE_LIMIT:
+                self._local.pop(next(iter(self._local)))
+            self._local[mesh.geometry_key] = cached
+        return cached
+
+    def __call__(self, snapshot) -> list:
+        """Per element, (min, max) world bounds, or None when it has no triangles."""
+        bounds = [None] * len(snapshot.elements)
+        signs = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
+        for mesh in snapshot.meshes:
+            if mesh.n_triangles == 0:
+                continue
+            for element, (low, high) in self._local_bounds(mesh).items():
+                if element >= len(bounds):
+                    continue
+                corners = transform_points(mesh.matrix_world, low + signs * (high - low))
+                world_low, world_high = corners.min(axis=0), corners.max(axis=0)
+                if bounds[element] is None:
+                    bounds[element] = (world_low, world_high)
+                else:
+                    bounds[element] = (np.minimum(bounds[element][0], world_low),
+                                       np.maximum(bounds[element][1], world_high))
+        return bounds
+
+
+def shadow_region(light, bounds, points) -> np.ndarray:
+    """Points (world, (N,3)) whose segment to ``light`` may pass through the box ``bounds``:
+    the pixels an element can shadow.  Conservative (a bounding sphere or a light-space box)."""
+    low, high = bounds
+    centre = (low + high) / 2.0
+    radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+    if light.kind == "SUN":
+        direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+        relative = points - centre
+        along = relative @ direction  # > 0: downstream of the caster
+        lateral = relative - along[:, None] * direction
+        return (along > -radius) & (np.einsum("ij,ij->i", lateral, lateral) <= radius * radius)
+    light_position = np.asarray(light.position, dtype=np.float64)
+    to_centre = centre - light_position
+    centre_distance = float(np.linalg.norm(to_centre))
+    if centre_distance <= radius:
+        return np.ones(len(points), bool)  # the light is inside the caster's bounds
+    axis = to_centre / centre_distance
+    to_point = points - light_position
+    point_distance = np.linalg.norm(to_point, axis=1)
+    cos_point = (to_point @ axis) / np.maximum(point_distance, 1e-30)
+    cos_cone = np.sqrt(max(1.0 - (radius / centre_distance) ** 2, 0.0))
+    return (cos_point >= cos_cone) & (point_distance > centre_distance - radius)
+
+
+class ShadowRegionIndex:
+    """``shadow_region`` for many casters and one light over the same points.
+
+    The points' light-space coordinates are computed once per light: for the sun, two
+    coordinates across the light and one along it; for local lights, the unit direction
+    from the light and the distance.  A caster is then a few float32 operations per point.
+    Once a light has ``SORT_AFTER_QUERIES`` casters, the points are also sorted by one
+    coordinate, and each further caster tests only the window of points that can be in
+    its cylinder or cone (a searchsorted range).  Same answer as ``shadow_region``."""
+
+    SORT_AFTER_QUERIES = 6
+
+    def __init__(self, light, points):
+        self.light = light
+        points = np.asarray(points, dtype=np.float64)
+        self.n = len(points)
+        self.queries = 0
+        self.order = None
+        if light.kind == "SUN":
+            direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+            helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+            across = shading.normalize(np.cross(direction, helper))
+            self.basis = np.stack([across, np.cross(direction, across), direction])
+            self.coords = (points @ self.basis.T).astype(np.float32)  # (u, v) across, w along
+        else:
+            self.origin = np.asarray(light.position, dtype=np.float64)
+            to_point = points - self.origin
+            distance = np.sqrt(shading.dot(to_point, to_point))
+            self.coords = np.concatenate([to_point / np.maximum(distance, 1e-30)[:, None], distance[:, None]],
+                                         axis=1).astype(np.float32)  # unit direction, distance
+
+    def _test(self, coords, bounds):
+        low, high = bounds
+        centre = (low + high) / 2.0
+        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+        if self.light.kind == "SUN":
+            cu, cv, cw = self.basis @ centre
+            du = coords[:, 0] - np.float32(cu)
+            dv = coords[:, 1] - np.float32(cv)
+            return (du * du + dv * dv <= np.float32(radius * radius)) & (coords[:, 2] > np.float32(cw - radius))
+        to_centre = centre - self.origin
+        distance = float(np.linalg.norm(to_centre))
+        if distance <= radius:
+            return np.ones(len(coords), bool)  # the light is inside the caster's bounds
+        axis = (to_centre / distance).astype(np.float32)
+        cos_cone = np.float32(np.sqrt(max(1.0 - (radius / distance) ** 2, 0.0)))
+        return (coords[:, :3] @ axis >= cos_cone) & (coords[:, 3] > np.float32(distance - radius))
+
+    def _window(self, bounds):
+        """The index range of sorted points that may pass ``_test`` (a superset)."""
+        low, high = bounds
+        centre = (low + high) / 2.0
+        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+        if self.light.kind == "SUN":
+            key = float(self.basis[0] @ centre)
+            reach = radius
+        else:
+            to_centre = centre - self.origin
+            distance = float(np.linalg.norm(to_centre))
+            if distance <= radius:
+                return 0, self.n
+            # Unit directions within the cone's half angle t of the axis a satisfy |d_x - a_x| <= t.
+            key = to_centre[0] / distance
+            reach = float(np.arcsin(min(radius / distance, 1.0)))
+        margin = 1e-5 * (abs(key) + reach) + 1e-6  # float32 keys
+        start = np.searchsorted(self.sorted_key, key - reach - margin, side="left")
+        stop = np.searchsorted(self.sorted_key, key + reach + margin, side="right")
+        return start, stop
+
+    def region(self, bounds) -> np.ndarray:
+        self.queries += 1
+        if self.queries <= self.SORT_AFTER_QUERIES:
+            return self._test(self.coords, bounds)
+        if self.order is None:
+            self.order = np.argsort(self.coords[:, 0], kind="stable")
+            self.sorted_key = self.coords[self.order, 0]
+            self.sorted_coords = self.coords[self.order]
+        start, stop = self._window(bounds)
+        result = np.zeros(self.n, bool)
+        result[self.order[start:stop]] = self._test(self.sorted_coords[start:stop], bounds)
+        return result
+
+
+class PointChunks:
+    """The points in small groups with a bounding sphere each (float64): a caster's cylinder or
+    cone that misses a sphere misses all of its points.  ``keys``: a group id per point (a
+    pixel's screen tile: compact groups); without them, runs of ``size`` consecutive points
+    (points in pixel order make runs along a row)."""
+
+    def __init__(self, points, keys=None, size: int = 64):
+        points = np.asarray(points, dtype=np.float64)
+        self.n = len(points)
+        if keys is None:
+            self.order = None
+            self.starts = np.arange(0, self.n, int(size))
+        else:
+            keys = np.asarray(keys)
+            if keys.shape != (self.n,):
+                raise ValueError(f"{keys.shape} keys for {self.n} points")
+            self.order = np.argsort(keys, kind="stable")
+            keys = keys[self.order]
+            points = points[self.order]
+            self.starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if self.n else np.zeros(0, np.int64)
+        self.counts = np.diff(np.r_[self.starts, self.n])
+        if self.n == 0:
+            self.centre, self.radius = np.zeros((0, 3)), np.zeros(0)
+            return
+        low = np.minimum.reduceat(points, self.starts, axis=0)
+        high = np.maximum.reduceat(points, self.starts, axis=0)
+        if np.isnan(low).any() or np.isnan(high).any():
+            # A NaN point (no surface) must not hide the others of its group (fmin ignores NaN,
+            # at twice the cost); a group of NaN only, or with an infinite point, keeps
+            # non-finite bounds and every caster tests its points.
+            low = np.fmin.reduceat(points, self.starts, axis=0)
+            high = np.fmax.reduceat(points, self.starts, axis=0)
+        self.centre = (low + high) / 2.0
+        with np.errstate(invalid="ignore", over="ignore"):
+            self.radius = 0.5 * np.sqrt(np.sum((high - low) ** 2, axis=1))
+
+    def points_of(self, chunks: np.ndarray) -> np.ndarray:
+        """Indices of the points in the chunks ``chunks`` (a boolean mask over chunks)."""
+        starts, counts = self.starts[chunks], self.counts[chunks]
+        total = int(counts.sum())
+        if total == 0:
+            return np.zeros(0, np.int64)
+        # Consecutive ranges [start, start + count) without a Python loop.
+        offsets = np.repeat(starts - np.r_[0, np.cumsum(counts)[:-1]], counts)
+        idx = offsets + np.arange(total)
+        return idx if self.order is None else self.order[idx]
+
+
+class TiledShadowRegions:
+    """``shadow_region`` for a few casters and one light over many points (a layer's pixels;
+    ``ShadowRegionIndex`` suits many casters over few points).
+
+    The points are grouped in runs (``PointChunks``, shareable between lights); a caster first
+    tests the runs' bounding spheres against its cylinder (sun) or cone (local lights), then
+    ``shadow_region`` runs on the points of the runs it may reach only.  A light whose casters
+    shadow little of the frame costs little.  The same answer as ``shadow_region`` (float64,
+    at any distance from the origin)."""
+
+    def __init__(self, light, points, chunks: PointChunks | None = None):
+        self.light = light
+        self.points = np.asarray(points, dtype=np.float64)
+        self.n = len(self.points)
+        self.chunks = chunks if chunks is not None else PointChunks(self.points)
+        if self.chunks.n != self.n:
+            raise ValueError(f"chunks of {self.chunks.n} points for {self.n} points")
+        self.queries = 0
+        self.points_tested = 0
+        if light.kind == "SUN":
+            self.direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+        else:
+            self.origin = np.asarray(light.position, dtype=np.float64)
+
+    def _chunks_reached(self, bounds) -> np.ndarray:
+        """Chunks whose bounding sphere may hold a point of the caster's region (conservative,
+        with a margin for rounding)."""
+        low, high = bounds
+        centre = (low + high) / 2.0
+        radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+        chunk_centre, chunk_radius = self.chunks.centre, self.chunks.radius
+        with np.errstate(invalid="ignore", over="ignore"):
+            # float64 rounding: a few ulps of the largest magnitude involved
+            slack = 1e-9 * (np.abs(chunk_centre).max(axis=1) + chunk_radius + float(np.abs(centre).max()) + radius
+                            + (0.0 if self.light.kind == "SUN" else float(np.abs(self.origin).max()))) + 1e-6
+            reach = chunk_radius + slack
+            if self.light.kind == "SUN":
+                relative = chunk_centre - centre
+                along = relative @ self.direction
+                lateral = np.sqrt(np.maximum(np.sum(relative * relative, axis=1) - along * along, 0.0))
+                reached = (along + reach > -radius) & (lateral - reach <= radius)
+            else:
+                to_centre = centre - self.origin
+                distance = float(np.linalg.norm(to_centre))
+                if distance <= radius:
+                    return np.ones(len(chunk_centre), bool)
+                to_chunk = chunk_centre - self.origin
+                chunk_distance = np.sqrt(np.sum(to_chunk * to_chunk, axis=1))
+                cos_angle = np.clip((to_chunk @ to_centre) / np.maximum(chunk_distance * distance, 1e-300), -1.0, 1.0)
+                # The widest angle a point of the sphere makes with the direction to its centre.
+                spread = np.arcsin(np.clip(reach / np.maximum(chunk_distance, 1e-300), 0.0, 1.0))
+                cone = np.arcsin(min(radius / distance, 1.0))
+                reached = ((chunk_distance <= reach) | (np.arccos(cos_angle) <= cone + spread + 1e-4)) \
+                    & (chunk_distance + reach > distance - radius)
+            # Unknown bounds (a NaN or infinite point in the group): its points are tested.
+            reached |= ~np.isfinite(chunk_radius)
+        return reached
+
+    def region(self, bounds) -> np.ndarray:
+        self.queries += 1
+        result = np.zeros(self.n, bool)
+        idx = self.chunks.points_of(self._chunks_reached(bounds))
+        if len(idx):
+            self.points_tested += len(idx)
+            with np.errstate(invalid="ignore", over="ignore"):  # a non-finite point is in no region
+                result[idx] = shadow_region(self.light, bounds, self.points[idx])
+        return result

@@ -1,0 +1,202 @@
+"""Ray traced radiance (the tracer's shading): shadows, reflections and refractions of hits.
+
+``RadianceTracer`` shades the hits of rays cast in a ``trace_scene.TraceScene`` with the
+BRDF of ``shading.py`` (the one the GLSL lighting implements too), shadow rays and
+recursion.
+
+Bounces (``Settings.max_bounces``): a bounce is a reflection or refraction ray,
+which changes the ray's direction.  Rays from the G-buffer are bounce 1 (with
+``max_bounces`` 0 nothing is reflected or refracted by the tracer); a hit of bounce
+k may bounce again while k < max_bounces.  Out of bounces, a reflection sees the
+environment (the raster's stand-in) and light through a transmissive surface goes
+straight on, unbent (the raster's blended transparency).  A total internal
+reflection costs ``TIR_BOUNCE_COST`` of a bounce.  Light passing straight through
+a surface (its 1 - alpha part, or a transmissive one out of bounces) is not a
+bounce; at most ``MAX_PASS_THROUGH`` surfaces are passed through per path.
+Secondary rays leave along the *geometric* normal, on the side they leave
+(``leave_surface``): the interpolated normal of a coarse smooth mesh can point
+below the surface.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import rules, shading
+from .embree_scene import TraceScene
+
+# Reflections are traced on surfaces up to this roughness (a single mirror-direction
+# ray, blended towards the environment as roughness grows; see ``reflection_blend``).
+ROUGHNESS_LIMIT = 0.5
+# A total internal reflection costs this fraction of a bounce: it does not branch, and light that
+# enters a glass block through a side face needs a few of them to get out.
+TIR_BOUNCE_COST = 0.25
+# Surfaces a path may pass straight through (alpha cards, glass out of bounces).
+MAX_PASS_THROUGH = 16
+# Secondary directions are kept at least this cosine away from the geometric surface.
+MIN_LEAVING_COSINE = 1e-4
+
+
+def reflection_blend(roughness):
+    """Weight of the traced mirror reflection vs the environment term: 1 for a mirror,
+    falling to 0 at ``ROUGHNESS_LIMIT``."""
+    return np.clip(1.0 - np.asarray(roughness) / ROUGHNESS_LIMIT, 0.0, 1.0) ** 2
+
+
+def leave_surface(directions, geometric_normal, side=1.0):
+    """``directions`` bent just enough to leave the geometric surface on ``side`` (+1: the side
+    ``geometric_normal`` points to, -1: the other).  A mirror direction about an interpolated
+    normal can point into the surface on coarse smooth meshes; Embree would then hit the
+    surface itself."""
+    normal = geometric_normal * side
+    along = shading.dot(directions, normal)
+    wrong = along < MIN_LEAVING_COSINE
+    if not np.any(wrong):
+        return directions
+    fixed = directions.copy()
+    fixed[wrong] += (MIN_LEAVING_COSINE - along[wrong])[:, None] * normal[wrong]
+    fixed[wrong] = shading.normalize(fixed[wrong])
+    return fixed
+
+
+class RadianceTracer:
+    """Shades ray hits with the shared BRDF, shadow rays and recursion to ``max_bounces``."""
+
+    def __init__(self, trace_scene: TraceScene, snapshot, materials: shading.MaterialTable, textures=None):
+        self.scene = trace_scene
+        self.snapshot = snapshot
+        self.materials = materials
+        self.textures = textures or {}
+        self.world = np.asarray(snapshot.world_color, dtype=np.float64)
+        self.max_bounces = max(int(snapshot.settings.max_bounces), 0)
+        self.rays = 0
+        self.shadow_rays = 0
+
+    def _albedo(self, material, uv):
+        albedo = self.materials.base_color[material].copy()
+        for index in np.unique(material):
+            texture = self.textures.get(int(index))
+            if texture is None:
+                continue
+            chosen = material == index
+            albedo[chosen] *= rules.sample_texture(texture, uv[chosen])[:, :3]
+        return albedo
+
+    def direct(self, points_trace, surface: shading.SurfaceSamples, view_distance=None, offset_normal=None,
+               eps=None):
+        """Direct light with traced shadows at trace-frame points.  Shadow rays start ``eps``
+        (default: ``TraceScene.epsilon`` with ``view_distance``) along ``offset_normal`` (the
+        geometric normal on the lit side; default: the shading normal)."""
+        total = np.zeros((len(points_trace), 3))
+        if len(points_trace) == 0:
+            return total
+        origin_world = self.scene.origin
+        if eps is None:
+            eps = self.scene.epsilon(points_trace, view_distance)
+        offset_normal = surface.normal if offset_normal is None else offset_normal
+        for light in self.snapshot.lights:
+            direction, distance, irradiance = shading.light_incidence(light, points_trace, origin_world)
+            contribution = shading.brdf_cosine(surface, direction) * irradiance
+            lit = np.any(contribution > 0, axis=1)
+            if light.cast_shadows and np.any(lit):
+                idx = np.flatnonzero(lit)
+                start = points_trace[idx] + offset_normal[idx] * eps[idx, None]
+                blocked = self.scene.occluded(start, direction[idx], distance[idx] - 2 * eps[idx])
+                self.shadow_rays += len(idx)
+                contribution[idx[blocked]] = 0.0
+            total += contribution
+        return total
+
+    def radiance(self, origins, directions, depth, passed=0):
+        """Radiance arriving along trace-frame rays (N,3).  ``depth``: the bounces this ray has
+        taken (0 for a camera ray, 1 for a ray leaving the G-buffer), a number or one per ray;
+        ``passed``: the surfaces its path has passed straight through."""
+        n = len(origins)
+        depth = np.broadcast_to(np.asarray(depth, dtype=np.float64), (n,))
+        passed = np.broadcast_to(np.asarray(passed, dtype=np.int64), (n,))
+        result = np.broadcast_to(self.world, (n, 3)).copy()
+        if n == 0:
+            return result
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = shading.normalize(np.nan_to_num(np.asarray(directions, dtype=np.float64)))
+        self.rays += n
+        hits = self.scene.intersect(origins, directions)
+        hit_mask = np.isfinite(hits["t"]) & (hits["geom"] >= 0)
+        if not np.any(hit_mask):
+            return result
+        idx, material, _, normal, geometric, uv, set_index = self.scene.hit_surfaces(hits, hit_mask)
+        dirs = directions[idx]
+        points = origins[idx] + dirs * hits["t"][idx][:, None]
+        # A degenerate triangle has no geometric normal: use the shading normal, else the ray.
+        no_geometric = np.linalg.norm(geometric, axis=1) < 0.5
+        geometric[no_geometric] = normal[no_geometric]
+        still = np.linalg.norm(geometric, axis=1) < 0.5
+        geometric[still] = -dirs[still]
+        # Which side: the ray arrives from outside where it opposes the outward normal.
+        entering = np.sum(geometric * dirs, axis=1) < 0
+        facing = np.where(entering[:, None], normal, -normal)
+        geometric_facing = np.where(entering[:, None], geometric, -geometric)
+        m = self.materials
+        surface = shading.SurfaceSamples(
+            position=points, normal=facing, view=-dirs, albedo=self._albedo(material, uv),
+            metallic=m.metallic[material], roughness=m.roughness[material],
+            transmission=m.transmission[material], ior=m.ior[material], emission=m.emission[material])
+        travelled = hits["t"][idx]
+        eps = self.scene.epsilon(points, travelled, set_index=set_index)
+        color = surface.emission + self.direct(points, surface, offset_normal=geometric_facing, eps=eps)
+        diffuse_ambient, env_fresnel = shading.ambient(surface, self.world)
+        color += diffuse_ambient
+        transmissive = m.transmissive[material]
+        # Dielectric Fresnel for the transmissive part (exact, with total internal reflection).
+        eta = np.where(entering, 1.0 / surface.ior, surface.ior)
+        cos_i = np.clip(np.sum(-dirs * facing, axis=1), 0.0, 1.0)
+        fresnel_t = shading.fresnel_dielectric(cos_i, 1.0 / eta)
+        reflect_weight = env_fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
+        blend = reflection_blend(surface.roughness)
+        depth = depth[idx]
+        passed = passed[idx]
+        can_bounce = depth < self.max_bounces
+        transmits = transmissive > rules.TRANSPARENT_EPSILON
+        # Total internal reflection: nothing is refracted, and the bounce costs only
+        # TIR_BOUNCE_COST, so light entering a glass side face can get out again.
+        total_internal = transmits & (fresnel_t >= 1.0)
+        next_depth = depth + np.where(total_internal, TIR_BOUNCE_COST, 1.0)
+        reflected = np.broadcast_to(self.world, (len(idx), 3)).copy()
+        trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02)
+        refracts = transmits & ~total_internal
+        tint = np.where(entering[:, None], surface.albedo, 1.0)
+        trace_refraction = can_bounce & refracts
+        # Straight on, unbent: the 1 - alpha part of the surface, and the transmitted part of a
+        # transmissive surface out of bounces (the raster's blended transparency).
+        alpha = m.alpha[material][:, None]
+        straight_weight = (1.0 - alpha) + alpha * np.where(
+            (refracts & ~can_bounce)[:, None], (transmissive * (1.0 - fresnel_t))[:, None] * tint, 0.0)
+        straight = np.flatnonzero(straight_weight.max(axis=1) > 0)
+        more = passed[straight] < MAX_PASS_THROUGH
+
+        # Every secondary ray of this batch (reflected, refracted, passing straight on) is traced
+        # in one call: one Embree query and one hit shading per bounce level, not per branch.
+        r = np.flatnonzero(trace_reflection)
+        t = np.flatnonzero(trace_refraction)
+        s = straight[more]
+        reflect_direction = leave_surface(shading.reflect(dirs[r], facing[r]), geometric_facing[r])
+        refract_direction, _ = shading.refract(dirs[t], facing[t], eta[t])
+        refract_direction = leave_surface(refract_direction, geometric_facing[t], side=-1.0)
+        secondary = self.radiance(
+            np.concatenate([points[r] + geometric_facing[r] * eps[r, None],
+                            points[t] - geometric_facing[t] * eps[t, None],
+                            points[s] - geometric_facing[s] * eps[s, None]]),
+            np.concatenate([reflect_direction, refract_direction, dirs[s]]),
+            np.concatenate([next_depth[r], next_depth[t], depth[s]]),
+            np.concatenate([passed[r], passed[t], passed[s] + 1]))
+        traced, through, passing = np.split(secondary, [len(r), len(r) + len(t)])
+
+        reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
+        color += reflect_weight * reflected
+        color[t] += (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint[t] * through
+        color *= alpha
+        if len(straight):
+            behind = np.broadcast_to(self.world, (len(straight), 3)).copy()
+            behind[more] = passing
+            color[straight] += straight_weight[straight] * behind
+        result[idx] = shading.finite(color)
+        return result
