@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast test-compat bench paper soak extension scenes clean
+.PHONY: demo test test-fast test-compat bench paper soak extension scenes clean selection-eval
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -46,6 +46,16 @@ paper: $(STAMP)
 # out/soak/soak.json.
 soak: $(STAMP)
 	$(PY) tools/soak.py --out out/soak
+
+# The selections judged on the held-out paths (issue 20): sweeps at 320x240, budgets 0.1-0.9 of the
+# way, the oracle every 4th frame, variants measured, error, benefit; one table of captured share
+# (90% interval), pops / 100 frames and p95 / budget in out/selection-eval/selection_eval.{csv,md}.
+# LONG (hours at the default 240 frames per path); resumes.  A short one:
+# `make selection-eval EVAL_FRAMES=1-48 EVAL_PATHS=arcade/path3`.
+EVAL_FRAMES ?= 1-240
+EVAL_PATHS ?= arcade/path3,atrium/path2,atrium/path3,showcase/orbit
+selection-eval: $(STAMP)
+	$(PY) tools/selection_eval.py --out out/selection-eval --frames $(EVAL_FRAMES) --paths $(EVAL_PATHS)
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes

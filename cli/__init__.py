@@ -7,6 +7,7 @@
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
                      [--workers N | --scheduler ADDRESS]
+    phrt rescore SWEEP_DIR [--out DIR]
     phrt advise SCENE [--path NAME] [--frames A-B] [--budget-at F,F...] [--resolution WxH] [--out DIR]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
@@ -32,6 +33,7 @@ from .blender_process import import_blender as _import_blender
 from .blender_process import quiet_exit as _quiet_exit
 from .blender_process import quiet_stdout as _quiet_stdout
 from . import advise as advise_command
+from .rescore import command_rescore
 
 
 class _Parser(argparse.ArgumentParser):
@@ -61,6 +63,10 @@ def build_parser():
     report.add_argument("runs", nargs="+", metavar="RUN_DIR")
     report.add_argument("--reference", help="reference run (default: the raytrace run among RUN_DIRs)")
     report.add_argument("--out", default="out/report", help="report folder (default: out/report)")
+    rescore = commands.add_parser("rescore", help="judge a sweep's recorded choices again on its oracle's "
+                                                  "measurements, without rendering")
+    rescore.add_argument("sweep_dir", metavar="SWEEP_DIR")
+    rescore.add_argument("--out", help="folder for rescore.csv and rescore.md (default: SWEEP_DIR/report)")
     sweep = commands.add_parser("sweep", help="error against run time: raster, raytrace and hybrid at N budgets")
     sweep.add_argument("scene", help="a .blend file or a sample scene name (arcade, atrium)")
     sweep.add_argument("--path", help="camera path (camera object) to replay (default: the scene's first)")
@@ -375,10 +381,10 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     try:
         args = build_parser().parse_args(argv)
-        if args.command != "report":  # every other command runs Blender
+        if args.command not in ("report", "rescore"):  # every other command runs Blender
             _import_blender()
         command = {"scenes": command_scenes, "render": command_render, "report": command_report,
-                   "sweep": command_sweep,
+                   "rescore": command_rescore, "sweep": command_sweep,
                    "advise": lambda parsed: advise_command.command_advise(parsed, parse_resolution)}[args.command]
         return command(args)
     except UserError as error:

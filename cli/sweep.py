@@ -107,8 +107,10 @@ def _run(plan, folder, job, scene, camera, partial) -> str:
                    if plan.job(dependency).mode == "HYBRID"}
         reference = next(folder / dependency for dependency in job.depends_on
                          if plan.job(dependency).mode == "RAYTRACE")
-        info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, every=plan.oracle_every,
-                                        resolution=resolution)
+        raster = next((folder / dependency for dependency in job.depends_on
+                       if plan.job(dependency).mode == "RASTER"), None)
+        info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, raster_dir=raster,
+                                        every=plan.oracle_every, resolution=resolution)
         message = f"{len(info['frames'])} sampled frames, {len(hybrids)} runs"
     else:
         raise ValueError(f"unknown job kind '{job.kind}'")

@@ -109,16 +109,6 @@ def _prospects(rows, elements, frame_px, cap):
     return items.choose_prospects(found, cap)
 
 
-def _shared_ms(frame_rows) -> dict:
-    """{frame: raster + composite ms} of the raster run: what every selection pays on that frame (its
-    first frame, which holds one-time work, gets the median of the others)."""
-    shared = {row["frame"]: float(row["raster_ms"] or 0.0) + float(row["composite_ms"] or 0.0) for row in frame_rows}
-    if len(shared) > 1:
-        first = min(shared)
-        shared[first] = float(np.median([value for frame, value in shared.items() if frame != first]))
-    return shared
-
-
 def _competing(selection) -> list:
     terms = selection.terms
     mask = terms.candidate & terms.visible & terms.within_area
@@ -173,7 +163,7 @@ def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGE
         span = ends.raytrace_ms - ends.raster_ms
         budgets_ms[(float(milliseconds) - ends.raster_ms) / span if span > 0 else 1.0] = float(milliseconds)
     fractions = sorted(budgets_ms)
-    shared = _shared_ms(run_files.read_frames(work / "raster"))
+    shared = oracle.shared_ms(run_files.read_frames(work / "raster"))
     effects_of = {name: tuple(effect for effect in EFFECTS if getattr(element, effect))
                   for name, (element, _) in elements.items() if element.is_candidate}
     effects_of.update(prospect_effects)

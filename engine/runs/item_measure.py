@@ -1,7 +1,7 @@
 """Tracing one item alone and measuring it: the oracle's measurement, for (element, effect) items.
 
 :func:`measure_subset` renders a frame with a chosen set traced (``oracle.ForcedRenderer``),
-``TIMINGS`` times, and returns the image, the median trace ms (without one-time Embree uploads),
+``oracle.TIMINGS`` times, and returns the image, the median trace ms (without one-time Embree uploads),
 the timings' spread, and its LDR-FLIP against the reference (mean, and per pixel when asked).
 The oracle's "each candidate traced alone" and the advisor's "each item traced alone" are this
 one function.
@@ -20,12 +20,9 @@ import bpy
 import numpy as np
 
 from ...phrt_addon import naming
-from ...phrt_addon.report import metrics
+from ...phrt_addon.report import metrics, oracle
 from ...phrt_addon.schema import EFFECTS
 
-# Timings of each subset traced; its cost is their median (one timing hands the measurement the
-# luckiest of them: a winner's curse).
-TIMINGS = 3
 FIELDS = ("candidate", "priority", "rt_cost") + EFFECTS
 
 
@@ -45,9 +42,11 @@ class Measured:
     selection: object
 
 
-def measure_subset(renderer, frame, names, reference=None, *, timings=TIMINGS, per_pixel=False) -> Measured:
-    """Render ``frame`` with ``names`` traced ``timings`` times (the images are the same: the first
-    is kept) and measure it against ``reference`` (linear RGB, top row first)."""
+def measure_subset(renderer, frame, names, reference=None, *, timings=oracle.TIMINGS, per_pixel=False) -> Measured:
+    """Render ``frame`` with ``names`` traced ``timings`` times (the oracle's ``TIMINGS``: one timing
+    hands the measurement the luckiest of them, a winner's curse; the images are the same: the first
+    is kept) and measure it against ``reference`` (linear RGB, top row first): the median and spread
+    of the timings (``oracle.median_ms``) and the LDR-FLIP."""
     image, stats, selection = renderer.render(frame, names)
     measured = [trace_ms(stats)]
     for _ in range(max(int(timings), 1) - 1):
@@ -57,8 +56,8 @@ def measure_subset(renderer, frame, names, reference=None, *, timings=TIMINGS, p
         error = metrics.flip(reference, image)
         if per_pixel:
             error_map = metrics.flip_map(reference, image)
-    return Measured(image=image, trace_ms=float(np.median(measured)), spread_ms=float(max(measured) - min(measured)),
-                    flip=error, flip_map=error_map, stats=stats, selection=selection)
+    median, spread = oracle.median_ms(measured)
+    return Measured(image=image, trace_ms=median, spread_ms=spread, flip=error, flip_map=error_map, stats=stats, selection=selection)
 
 
 def owner_of(element: str):

@@ -75,15 +75,33 @@ def _selection_by_frame(run_dir):
     return chosen
 
 
-def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=oracle.DEFAULT_EVERY,
+def _budget_groups(runs):
+    """{budget ms: [labels]}: the hybrid runs judged by one oracle (their budget, rounded to 0.1 ms)."""
+    groups = {}
+    for label, run in runs.items():
+        budget = run["budget_ms"]
+        if budget is not None:
+            groups.setdefault(round(float(budget), 1), []).append(label)
+    return groups
+
+
+def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir=None, every=oracle.DEFAULT_EVERY,
                resolution=None, on_progress=None):
-    """Measure candidates on every ``every``-th frame of the reference run and the regret of each
-    hybrid run (``{label: run dir}``); write the oracle folder ``out_dir``.  Returns its info."""
+    """Measure candidates on every ``every``-th frame of the reference run, choose one oracle subset
+    per budget of the hybrid runs (``{label: run dir}``) within that budget's nominal time for
+    tracing, render it, and write each run's regret to the oracle folder ``out_dir``.  The shared
+    part of a frame's time comes from the raster run ``raster_dir`` (else from the oracle's own
+    frame with nothing traced).  Returns the folder's info."""
     reference_dir = Path(reference_dir)
     reference_frames = [row["frame"] for row in run_files.read_frames(reference_dir)]
     frames = oracle.sampled_frames(reference_frames, every)
-    runs = {label: {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_files.read_frames(run_dir)},
-                    "selected": _selection_by_frame(run_dir)} for label, run_dir in hybrid_dirs.items()}
+    shared_of = oracle.shared_ms(run_files.read_frames(raster_dir)) if raster_dir is not None else {}
+    runs = {}
+    for label, run_dir in hybrid_dirs.items():
+        summary = run_files.read_summary(run_dir)
+        runs[label] = {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_files.read_frames(run_dir)},
+                       "selected": _selection_by_frame(run_dir), "budget_ms": summary.get("budget_ms")}
+    budgets = _budget_groups(runs)
     measured, regret_rows = [], []
     with ForcedRenderer(scene, camera, resolution) as renderer:
         for count, frame in enumerate(frames):
@@ -95,50 +113,53 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, every=orac
                 renderer.render(frame, ())
                 _, _, warm = renderer.render(frame, ())
                 renderer.render(frame, _competing(warm))
-            raster, _, selection = renderer.render(frame, ())
+            raster, raster_stats, selection = renderer.render(frame, ())
             flip_raster = metrics.flip(reference, raster)
+            shared = shared_of.get(frame)
+            if shared is None:
+                shared = float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)
             names = _competing(selection)
-            cost, alone, area = [], [], []
-            images = {frozenset(): raster}
+            cost, spread, alone, area = [], [], [], []
+            rendered = {frozenset(): (raster, 0.0)}  # subset -> (image, its measured trace ms)
             for name in names:  # the advisor's items are measured by the same function
-                traced = item_measure.measure_subset(renderer, frame, (name,), reference, timings=1)
-                images[frozenset((name,))] = traced.image
+                traced = item_measure.measure_subset(renderer, frame, (name,), reference)
+                rendered[frozenset((name,))] = (traced.image, traced.trace_ms)
                 cost.append(traced.trace_ms)
+                spread.append(traced.spread_ms)
                 alone.append(traced.flip)
                 area.append(int(selection.elements.area_px[selection.names.index(name)]))
             alone = np.array(alone, dtype=np.float64)
             cost = np.array(cost, dtype=np.float64)
             overhead = 0.0
             if len(names) > 1:  # all together: the trace stage's fixed part, paid once per frame
-                image, stats, _ = renderer.render(frame, names)
-                images[frozenset(names)] = image
-                overhead = oracle.trace_overhead_ms(
-                    cost, max(float(stats["trace_ms"]) - float(stats.get("upload_ms") or 0.0), 0.0))
+                together = item_measure.measure_subset(renderer, frame, names)
+                rendered[frozenset(names)] = (together.image, together.trace_ms)
+                overhead = oracle.trace_overhead_ms(cost, together.trace_ms)
             candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=cost - overhead,
                                                 benefit=flip_raster - alone, flip_raster=flip_raster,
-                                                flip_alone=alone, area_px=np.array(area), overhead_ms=overhead)
+                                                flip_alone=alone, area_px=np.array(area), overhead_ms=overhead,
+                                                cost_spread_ms=np.array(spread, dtype=np.float64))
             measured.append(candidates)
-            errors = {frozenset(): flip_raster, **{frozenset((n,)): e for n, e in zip(names, alone.tolist())}}
-            for label, run in runs.items():
-                row = run["frames"].get(frame)
-                run_image = run_files.frame_image_path(run["dir"], frame)
-                if row is None or run_image is None:
-                    continue
-                heuristic_set = frozenset(run["selected"].get(frame, set()))
-                heuristic_flip = metrics.flip(reference, metrics.read_image(run_image))
-                time_left = float(row.get("time_left_ms") or 0.0)
-                oracle_set = candidates.choose(candidates.capacity(time_left, heuristic_set))
-                if oracle_set == heuristic_set:
-                    oracle_flip = heuristic_flip  # the same selection renders the same image
-                else:
-                    if oracle_set not in errors:
-                        image = images.get(oracle_set)
-                        if image is None:
-                            image, _, _ = renderer.render(frame, oracle_set)
-                        errors[oracle_set] = metrics.flip(reference, image)
-                    oracle_flip = errors[oracle_set]
-                regret_rows.append(oracle.regret_row(label, frame, time_left, heuristic_set, heuristic_flip,
-                                                     oracle_set, oracle_flip, candidates))
+            flips = {}
+            for budget, labels in budgets.items():
+                oracle_set = candidates.choose(oracle.nominal_time_left(budget, shared))
+                if oracle_set not in rendered:  # rendered and measured even when a run chose the same
+                    image, stats, _ = renderer.render(frame, oracle_set)
+                    rendered[oracle_set] = (image, item_measure.trace_ms(stats))
+                if oracle_set not in flips:
+                    flips[oracle_set] = metrics.flip(reference, rendered[oracle_set][0])
+                for label in labels:
+                    run = runs[label]
+                    row = run["frames"].get(frame)
+                    run_image = run_files.frame_image_path(run["dir"], frame)
+                    if row is None or run_image is None:
+                        continue
+                    heuristic_set = frozenset(run["selected"].get(frame, set()))
+                    heuristic_flip = metrics.flip(reference, metrics.read_image(run_image))
+                    regret_rows.append(oracle.regret_row(
+                        label, frame, run["budget_ms"], shared, row.get("time_left_ms"), heuristic_set,
+                        heuristic_flip, oracle_set, flips[oracle_set], candidates,
+                        oracle_trace_ms=rendered[oracle_set][1]))
             if on_progress is not None:
                 on_progress(count + 1, len(frames))
     return oracle.write_results(out_dir, every, frames, measured, regret_rows,

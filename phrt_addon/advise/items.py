@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..report import oracle
 from ..schema import EFFECTS
 
 SEPARATOR = "/"
@@ -166,15 +167,16 @@ def books(measured, tagged, budgets_ms, shared_ms, selections=None, judged_frame
 
     ``tagged`` {key: bool} lists every item judged; ``budgets_ms`` {fraction: budget ms};
     ``shared_ms`` {frame: the raster + composite ms every selection pays on that frame}: the oracle
-    at a budget fills ``budget - shared``; ``selections`` {name: {fraction: {key: share}}} from the
+    at a budget fills ``oracle.nominal_time_left(budget, shared)``, as the sweep's oracle does; ``selections`` {name: {fraction: {key: share}}} from the
     replays (:func:`selection_shares`)."""
     measured = list(measured)
     count = len(measured) if judged_frames is None else int(judged_frames)
     result = {key: ItemBook(key=key, tagged=bool(flag), judged_frames=count) for key, flag in tagged.items()}
     chosen_counts = {key: {fraction: 0 for fraction in budgets_ms} for key in result}
     for candidates in measured:
-        shared = float(shared_ms.get(candidates.frame, 0.0))
-        choices = {fraction: candidates.choose(float(budget) - shared) for fraction, budget in budgets_ms.items()}
+        shared = shared_ms.get(candidates.frame, 0.0)
+        choices = {fraction: candidates.choose(oracle.nominal_time_left(budget, shared))
+                   for fraction, budget in budgets_ms.items()}
         for index, key in enumerate(candidates.names):
             book = result.get(key)
             if book is None:

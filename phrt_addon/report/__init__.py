@@ -3,7 +3,11 @@
 :func:`build_report` reads RUN_DIRs (see :mod:`.runlog`) and writes into
 ``out_dir``:
 
-- ``report.md`` and ``report.html``: a table in the style of the paper's
+- ``report.md`` and ``report.html``: first the error-time curve and, per
+  budget, the selection variants side by side (``results.py``: the captured
+  share of the oracle's error reduction with its 90% interval from
+  ``captured.py``, LDR-FLIP, popping, p95 / budget, within budget; a
+  difference named only where intervals do not overlap), then a table in the style of the paper's
   Table II (mean ms per frame of the raster, hybrid and raytrace runs, one row
   per (scene, path)), a table of every run (frame time statistics, stages,
   budget), the error of every run against the reference run (mean LDR-FLIP,

@@ -3,8 +3,8 @@
 from pathlib import Path
 
 from . import oracle
-from .document import ReportTable, report_sections
-from .markup import to_html, to_markdown
+from .document import report_sections
+from .markup import ReportTable, to_html, to_markdown
 from .plots import plot_error_vs_time, plot_selection_quality, plot_timeline
 from .runs import ReportFiles, measure_group, find_references, unique_labels, write_errors_csv, load_run
 from .selection import measure_run_popping, load_oracle_results, run_regrets, write_sweep, sweep_rows

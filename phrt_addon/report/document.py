@@ -1,13 +1,13 @@
 """The report document's sections (items for ``markup``): Table II beside the paper's, runs, errors,
 stability, and with a sweep the runs on the error-time curve, regret, popping and the relevance verdict.
 """
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import defaults
-from . import metrics, oracle
+from . import captured, metrics, oracle
 from ..runs import run_log
+from .markup import ReportTable
+from .results import results_sections
 from .runs import BASELINE_VARIANT, PAPER_SCENES, PAPER_TABLE_II, WORST_ELEMENTS
 from .selection import RunRegret, variant_label
 
@@ -18,14 +18,6 @@ def _ms(value):
 
 def _number(value, spec):
     return "–" if value is None else format(value, spec)
-
-
-@dataclass
-class ReportTable:
-    title: str
-    header: list
-    rows: list
-    intro: str = ""
 
 
 def table_ii_hybrid(members):
@@ -51,9 +43,9 @@ def table_ii_rows(groups):
         means = {}
         for mode in ("RASTER", "RAYTRACE"):
             runs = [run for run in members if run.mode == mode]
-            means[mode] = runs[0].mean("total_ms") if runs else None
+            means[mode] = runs[0].steady("mean") if runs else None
         hybrid = table_ii_hybrid(members)
-        means["HYBRID"] = hybrid.mean("total_ms") if hybrid is not None else None
+        means["HYBRID"] = hybrid.steady("mean") if hybrid is not None else None
         paper = PAPER_TABLE_II.get((PAPER_SCENES.get(scene, scene), path))
         rows.append([scene, path, _ms(means["RASTER"]), _ms(means["HYBRID"]), _ms(means["RAYTRACE"]),
                      _number(_ratio(means["HYBRID"], means["RASTER"]), ".2f"),
@@ -70,41 +62,48 @@ def report_sections(runs, groups, references, errors, files, rows=None, regrets=
     regrets = regrets or {}
     pops = pops or {}
     items = [("h1", "PHRT report")]
-    items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are "
-                       f"means over the frames of each run, in milliseconds."))
+    items.append(("p", f"{len(runs)} runs of {len(groups)} camera path(s). Frame times are steady: over the "
+                       f"frames after each run's first, one-time work out (the first frame's own cost is in the "
+                       f"Runs table); milliseconds per frame."))
+    items.append(("img", files.error_vs_time_png.name,
+                  "Mean LDR-FLIP (left) and relMSE (right) against steady mean frame time: each selection "
+                  "variant's runs joined from raster through its budgets to ray tracing, the Pareto front dashed, "
+                  "each hybrid point's budget marked (a tick dotted to the point, and a red line per budget)."))
+    items += results_sections(rows)
 
     items.append(("table", ReportTable(
         "Render times (ms per frame), after the paper's Table II",
         ["Scene", "Path", "Raster rendering", "Hybrid rendering", "Ray tracing rendering", "Hybrid / raster",
          "Paper: hybrid / raster", "Ray tracing / hybrid", "Paper: ray tracing / hybrid", "Hybrid run"],
         table_ii_rows(groups),
-        "Mean time to render a frame of the path in each mode, laid out like the paper's Table II, "
+        "Steady mean time to render a frame of the path in each mode, laid out like the paper's Table II, "
         "with our ratios beside the paper's own (its Table II: 640x480, 1000 frames per path, a GTX 460M); "
         "milliseconds on different machines do not compare, ratios may. The arcade scene stands for the "
         "paper's Sponza, atrium for its atrium. The hybrid column is the paper's heuristic (measured "
         f"cost, I = {defaults.SELECTION_WEIGHT:g}, R order, paper relevance) at the budget nearest "
         f"{defaults.BUDGET_AT:g} of the way from raster to ray traced time, or the only hybrid run.")))
 
+    items += _sweep_sections(rows, groups, regrets, pops, oracle_results, files)
+
     run_rows = []
     for run in runs:
-        frames, total = run.column("total_ms")
         budget = run.summary.get("budget_ms")
-        within = (f"{100.0 * np.mean(total <= budget):.0f}%"
-                  if budget and total.size and run.mode == "HYBRID" else "–")
+        within = run.within_budget() if run.mode == "HYBRID" else None
         run_rows.append([
             run.label, f"{run.scene} / {run.path}", run.mode.lower(),
-            _number(budget, "g"), str(len(run.frames)), _ms(run.mean("total_ms")),
-            _ms(run.percentile("total_ms", 50)), _ms(run.percentile("total_ms", 95)),
-            _ms(float(total.max()) if total.size else None),
+            _number(budget, ".0f"), str(len(run.frames)), _ms(run.first_frame_ms), _ms(run.steady("mean")),
+            _ms(run.steady("p50")), _ms(run.steady("p95")), _ms(run.steady("max")),
             _ms(run.mean("raster_ms")), _ms(run.mean("select_ms")), _ms(run.mean("trace_ms")),
-            _ms(run.mean("composite_ms")), _number(run.mean("n_selected"), ".1f"), within])
+            _ms(run.mean("composite_ms")), _number(run.mean("n_selected"), ".1f"),
+            "–" if within is None else f"{100.0 * within:.0f}%"])
     items.append(("table", ReportTable(
         "Runs",
-        ["Run", "Scene / path", "Mode", "Budget ms", "Frames", "Mean ms", "p50 ms", "p95 ms",
+        ["Run", "Scene / path", "Mode", "Budget ms", "Frames", "First frame ms", "Mean ms", "p50 ms", "p95 ms",
          "Max ms", "Raster ms", "Select ms", "Trace ms", "Composite ms", "Mean selected",
          "Within budget"], run_rows,
-        "Stage columns are means per frame; 'within budget' is the share of hybrid frames "
-        "whose total time met the budget.")))
+        "Frame time statistics are steady (the frames after the first, one-time work out); the first "
+        "frame's own time beside them. Stage columns are means per frame; 'within budget' is the share of "
+        "steady hybrid frames whose time met the budget.")))
 
     error_rows = []
     for run in runs:
@@ -127,11 +126,6 @@ def report_sections(runs, groups, references, errors, files, rows=None, regrets=
         f"compared frames, except PSNR: the PSNR of the mean per-frame MSE (a frame identical "
         f"to the reference would otherwise count at the {metrics.PSNR_CAP_DB:g} dB cap). "
         f"Per-frame values: [{files.errors_csv.name}]({files.errors_csv.name}).")))
-    items.append(("img", files.error_vs_time_png.name,
-                  "Mean LDR-FLIP (left) and relMSE (right) against mean frame time: each selection variant's "
-                  "runs joined from raster through its budgets to ray tracing, the Pareto front dashed, each "
-                  "hybrid point's budget marked (a tick dotted to the point, and a red line per budget)."))
-    items += _sweep_sections(rows, groups, regrets, pops, oracle_results, files)
     items.append(("img", files.timeline_png.name,
                   "Frame time of each run per frame with the budget (dashed), and selected elements."))
 
@@ -289,37 +283,43 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
 
 
 def relevance_verdict(paper, error):
-    """Which relevance wins over the budgets both ran ({budget_at: sweep row}): the mean LDR-FLIP
-    over those budgets (the area under each curve), the budgets where each is lower, and the
-    mean regret.  Returns (text, relative change of the mean LDR-FLIP or None)."""
+    """The paper's relevance against the error-aware one over the budgets both ran ({budget_at: sweep
+    row}): at each budget a difference only where the captured shares' 90% intervals do not overlap
+    ("no difference" otherwise), then the mean LDR-FLIP over those budgets and the budgets where each
+    is lower, as numbers.  Returns (text, relative change of the mean LDR-FLIP or None)."""
     shared = sorted(fraction for fraction in set(paper) & set(error)
                     if paper[fraction]["flip"] is not None and error[fraction]["flip"] is not None)
     if not shared:
         return "the two relevances could not be compared (no error measured).", None
+    said = {"error-aware": 0, "paper": 0, captured.NO_DIFFERENCE: 0}
+    for fraction in shared:
+        verdict = captured.verdict("error-aware", _judged(error[fraction]), "paper", _judged(paper[fraction]))
+        said[verdict.replace(" captures more", "")] += 1
+    if said["error-aware"] == said["paper"] == 0:
+        head = (f"no difference at any of the {len(shared)} budget(s) (the captured shares' 90% intervals "
+                f"overlap, or there is no oracle)")
+    else:
+        head = (f"the error-aware relevance captures more at {said['error-aware']}, the paper's at "
+                f"{said['paper']}, no difference at {said[captured.NO_DIFFERENCE]} of the {len(shared)} budget(s)")
     flip_paper = float(np.mean([paper[f]["flip"] for f in shared]))
     flip_error = float(np.mean([error[f]["flip"] for f in shared]))
     lower = sum(1 for f in shared if error[f]["flip"] < paper[f]["flip"])
     higher = sum(1 for f in shared if error[f]["flip"] > paper[f]["flip"])
     change = (flip_error - flip_paper) / flip_paper if flip_paper > 0 else None
-    if flip_error == flip_paper:
-        head = "neither relevance wins"
-    else:
-        head = f"the {'error-aware' if flip_error < flip_paper else 'paper'} relevance wins"
-    text = (f"{head}: mean LDR-FLIP over the {len(shared)} budget(s) {flip_paper:.4f} with the paper's R, "
-            f"{flip_error:.4f} with the error-aware R"
-            + (f" ({100 * change:+.1f}%)" if change is not None else "")
+    text = (f"{head}; mean LDR-FLIP over the budgets {flip_paper:.3f} with the paper's R, "
+            f"{flip_error:.3f} with the error-aware R"
+            + (f" ({100 * change:+.0f}%)" if change is not None else "")
             + f"; the error-aware R is lower at {lower} and higher at {higher} of them")
-    regrets = [(paper[f]["regret"], error[f]["regret"]) for f in shared
-               if paper[f]["regret"] is not None and error[f]["regret"] is not None]
-    if regrets:
-        text += (f"; mean regret {np.mean([a for a, _ in regrets]):.4f} (paper R) against "
-                 f"{np.mean([b for _, b in regrets]):.4f} (error-aware R)")
-    shares = [(paper[f]["regret_share"], error[f]["regret_share"]) for f in shared
-              if paper[f].get("regret_share") is not None and error[f].get("regret_share") is not None]
+    shares = [(paper[f]["captured"], error[f]["captured"]) for f in shared
+              if paper[f].get("captured") is not None and error[f].get("captured") is not None]
     if shares:
-        text += (f", losing {100 * np.mean([a for a, _ in shares]):.0f}% against "
-                 f"{100 * np.mean([b for _, b in shares]):.0f}% of what the oracle gains over raster")
+        text += (f"; captured {np.mean([a for a, _ in shares]):.2f} (paper R) against "
+                 f"{np.mean([b for _, b in shares]):.2f} (error-aware R) of the oracle's error reduction")
     return text + ".", change
+
+
+def _judged(row):
+    return captured.Captured(share=row.get("captured"), low=row.get("captured_lo"), high=row.get("captured_hi"))
 
 
 def _relevance_comparison(scene, path, paper, error):

@@ -2,6 +2,17 @@
 """
 import html
 import re
+from dataclasses import dataclass
+
+
+@dataclass
+class ReportTable:
+    """A table of the report: title, header, rows of cells (text) and an introduction."""
+
+    title: str
+    header: list
+    rows: list
+    intro: str = ""
 
 
 def _markdown_cell(text):

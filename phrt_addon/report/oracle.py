@@ -1,4 +1,4 @@
-"""The oracle selection and the heuristic's regret (outside every timed region).
+"""The oracle selection and each run's regret against it (outside every timed region).
 
 On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
 (``engine/runs/oracle.py`` renders, this module decides and keeps the books):
@@ -8,20 +8,35 @@ On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
    reference (raytrace) run's image of the same frame
    - its **benefit**: mean LDR-FLIP of the raster frame minus that of the frame
      with the element traced alone (its own error drop), and
-   - its **cost**: the trace stage's measured ms when traced alone (without
-     one-time Embree uploads), less the trace stage's fixed part, which a frame
-     pays once whatever it traces (``overhead_ms``: how much the candidates
-     traced alone cost more, summed, than all of them traced together, per
-     extra trace); a subset costs its elements' costs plus that fixed part;
-2. for every hybrid run, chooses the subset of candidates with the largest
-   summed benefit whose summed cost fits the same time as the heuristic had:
-   the run's own time left T at that frame (``time_left_ms`` in its
-   ``frames.csv``), or what the heuristic's own choice costs when it overran T
-   (measured the same way, so the heuristic's choice is always one the oracle
-   could make): an exact 0/1 knapsack on measured numbers (:func:`knapsack`,
-   branch and bound);
-3. renders that subset and measures its error: ``regret = error(heuristic) -
-   error(oracle)``, the heuristic's error being that of the run's own image.
+   - its **cost**: the median of :data:`TIMINGS` timings of the trace stage
+     when traced alone (without one-time Embree uploads; one timing would
+     hand the oracle a winner's curse: the luckiest timing of each element),
+     less the trace stage's fixed part, which a frame pays once whatever it
+     traces (``overhead_ms``: how much the candidates traced alone cost more,
+     summed, than all of them traced together, per extra trace); a subset
+     costs its elements' costs plus that fixed part;
+2. **one oracle per budget**, the same for every variant at that budget: its
+   time for tracing (``capacity_ms``) is the budget's nominal time left on
+   that frame, ``budget_ms - shared_ms``, where ``shared_ms`` is what every
+   variant spends on that frame whatever it selects: the raster run's
+   ``raster_ms + composite_ms`` on that frame (:func:`shared_ms`; the median
+   of its steady frames for its first frame, which holds one-time work).
+   Selection time is not shared (a variant's own bookkeeping is part of what
+   it costs), nor is a run's own T (``time_left_ms``, kept beside for
+   reading): a run that overran, or whose bookkeeping shrank T, is judged on
+   the same scale as the others.  Within it, the subset of candidates with
+   the largest summed benefit: an exact 0/1 knapsack on measured numbers
+   (:func:`knapsack`, branch and bound);
+3. renders that subset (always: with an ample budget the oracle's image is
+   rendered and measured too, never copied from the run) and measures its
+   error and its own trace time (``oracle_trace_ms``, beside its predicted
+   ``oracle_cost_ms``): ``regret = error(run) - error(oracle)``, the run's
+   error being that of its own image.
+
+The oracle measures error, unweighted: the designer's priority K says what
+the designer wants traced first and steers a selection, but the yardstick is
+the error against the reference, the same for every element (a K-weighted
+oracle would reward a selection for agreeing with K, not for lowering error).
 
 Benefits below ``MIN_BENEFIT`` are raised to it: tracing an element never moves
 the frame away from the reference, which traces it too, so a measured drop at
@@ -29,7 +44,9 @@ or below zero is FLIP noise (and a budget that covers every candidate then
 traces them all, as the reference does).  Benefits add up only
 approximately (a reflection may show another traced element), which is why the
 chosen subset is rendered and measured rather than its predicted error
-trusted; the regret is therefore >= 0 up to that interaction and FLIP noise.
+trusted; a run may therefore beat the oracle on a frame (negative regret,
+counted by the report).  ``report/captured.py`` turns the rows into the share
+of the oracle's error reduction each run captures.
 
 Files in the oracle folder (``ORACLE_DIR`` of a sweep): ``candidates.csv`` (one
 row per sampled frame and candidate), ``regret.csv`` (one row per hybrid run
@@ -49,6 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from ..runs import run_log
+from ..runs import steady
 from .. import schema
 
 ORACLE_DIR = "oracle"
@@ -57,10 +75,16 @@ CANDIDATES_CSV = "candidates.csv"
 REGRET_CSV = "regret.csv"
 DEFAULT_EVERY = 8
 MIN_BENEFIT = 1e-6
-CANDIDATE_COLUMNS = ("frame", "element", "area_px", "cost_ms", "overhead_ms", "flip_alone", "flip_raster", "benefit")
-REGRET_COLUMNS = ("run", "frame", "time_left_ms", "capacity_ms", "heuristic_flip", "oracle_flip", "regret", "heuristic",
-                  "oracle", "oracle_only", "heuristic_only", "oracle_cost_ms", "heuristic_cost_ms",
-                  "oracle_benefit", "heuristic_benefit")
+# Timings of each candidate traced alone (and of all together); the cost is their median.
+TIMINGS = 3
+CANDIDATE_COLUMNS = ("frame", "element", "area_px", "cost_ms", "cost_spread_ms", "overhead_ms", "flip_alone",
+                     "flip_raster", "benefit")
+REGRET_COLUMNS = ("run", "frame", "budget_ms", "shared_ms", "capacity_ms", "time_left_ms", "raster_flip",
+                  "heuristic_flip", "oracle_flip", "regret", "heuristic", "oracle", "oracle_only", "heuristic_only",
+                  "oracle_cost_ms", "oracle_trace_ms", "heuristic_cost_ms", "oracle_benefit", "heuristic_benefit")
+REGRET_FLOATS = ("budget_ms", "shared_ms", "capacity_ms", "time_left_ms", "raster_flip", "heuristic_flip",
+                 "oracle_flip", "regret", "oracle_cost_ms", "oracle_trace_ms", "heuristic_cost_ms", "oracle_benefit",
+                 "heuristic_benefit")
 # Knapsack search nodes before giving up exactness (never reached with a frame's candidates).
 MAX_NODES = 2_000_000
 
@@ -143,10 +167,7 @@ class FrameCandidates:
     flip_alone: np.ndarray = field(default_factory=lambda: np.zeros(0))
     area_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
     overhead_ms: float = 0.0
-
-    def capacity(self, time_left_ms: float, heuristic_set) -> float:
-        """The time the oracle may fill: T, or the heuristic's own choice's cost if it overran T."""
-        return max(float(time_left_ms), self.totals(heuristic_set)[0])
+    cost_spread_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))  # max - min of the timings
 
     def choose(self, capacity_ms: float) -> frozenset:
         """The oracle's subset for ``capacity_ms`` of tracing (the fixed part paid once)."""
@@ -173,6 +194,35 @@ def trace_overhead_ms(alone_ms, together_ms) -> float:
     if len(alone) < 2 or not np.isfinite(together_ms):
         return 0.0
     return float(np.clip((alone.sum() - float(together_ms)) / (len(alone) - 1), 0.0, alone.min()))
+
+
+def shared_ms(raster_rows) -> dict:
+    """{frame: ms every variant spends on it whatever it selects}: the raster run's ``raster_ms +
+    composite_ms`` of each frame; its first frame (one-time work) and frames without both numbers
+    get the median over its steady frames."""
+    def both(row):
+        values = [row.get("raster_ms"), row.get("composite_ms")]
+        return None if any(value is None or not np.isfinite(value) for value in values) else float(sum(values))
+
+    rows = sorted(raster_rows, key=lambda row: int(row["frame"]))
+    own = {int(row["frame"]): both(row) for row in steady.steady_rows(rows)}
+    typical = [value for value in own.values() if value is not None]
+    fallback = float(np.median(typical)) if typical else None
+    return {int(row["frame"]): own[int(row["frame"])] if own.get(int(row["frame"])) is not None else fallback
+            for row in rows}
+
+
+def nominal_time_left(budget_ms, shared) -> float:
+    """The budget's nominal time for tracing on a frame: budget minus the shared part (>= 0)."""
+    if budget_ms is None or shared is None:
+        return 0.0
+    return max(float(budget_ms) - float(shared), 0.0)
+
+
+def median_ms(timings) -> tuple[float, float]:
+    """(median, max - min) of a candidate's timings."""
+    values = np.asarray(timings, dtype=np.float64)
+    return float(np.median(values)), float(values.max() - values.min())
 
 
 def summary_hash(run_dir) -> str | None:
@@ -241,9 +291,8 @@ def read_results(folder) -> OracleResults | None:
         parsed = dict(row)
         for key in ("frame",):
             parsed[key] = int(row[key])
-        for key in ("time_left_ms", "capacity_ms", "heuristic_flip", "oracle_flip", "regret", "oracle_cost_ms",
-                    "heuristic_cost_ms", "oracle_benefit", "heuristic_benefit"):
-            parsed[key] = float(row[key]) if row[key] != "" else None
+        for key in REGRET_FLOATS:
+            parsed[key] = float(row[key]) if row.get(key, "") != "" else None
         for key in ("heuristic", "oracle", "oracle_only", "heuristic_only"):
             parsed[key] = _names(row[key])
         regret_rows.append(parsed)
@@ -251,18 +300,19 @@ def read_results(folder) -> OracleResults | None:
     return OracleResults(folder=folder, info=info, regret_rows=regret_rows, candidate_rows=candidate_rows)
 
 
-def regret_row(run_label, frame, time_left_ms, heuristic_set, heuristic_flip, oracle_set, oracle_flip,
-               candidates: FrameCandidates) -> dict:
-    """One row of ``regret.csv``."""
+def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set, heuristic_flip, oracle_set,
+               oracle_flip, candidates: FrameCandidates, oracle_trace_ms=None) -> dict:
+    """One row of ``regret.csv``: a run's frame against its budget's oracle."""
     oracle_cost, oracle_benefit = candidates.totals(oracle_set)
     heuristic_cost, heuristic_benefit = candidates.totals(heuristic_set)
-    return {"run": run_label, "frame": frame, "time_left_ms": time_left_ms,
-            "capacity_ms": candidates.capacity(time_left_ms, heuristic_set), "heuristic_flip": heuristic_flip,
+    return {"run": run_label, "frame": frame, "budget_ms": budget_ms, "shared_ms": shared,
+            "capacity_ms": nominal_time_left(budget_ms, shared), "time_left_ms": time_left_ms,
+            "raster_flip": candidates.flip_raster, "heuristic_flip": heuristic_flip,
             "oracle_flip": oracle_flip, "regret": heuristic_flip - oracle_flip,
             "heuristic": _joined(heuristic_set), "oracle": _joined(oracle_set),
             "oracle_only": _joined(set(oracle_set) - set(heuristic_set)),
             "heuristic_only": _joined(set(heuristic_set) - set(oracle_set)),
-            "oracle_cost_ms": oracle_cost, "heuristic_cost_ms": heuristic_cost,
+            "oracle_cost_ms": oracle_cost, "oracle_trace_ms": oracle_trace_ms, "heuristic_cost_ms": heuristic_cost,
             "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
 
 
@@ -272,7 +322,9 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
         {"frame": item.frame, "element": name, "area_px": int(item.area_px[index]) if len(item.area_px) else None,
-         "cost_ms": float(item.cost_ms[index]), "overhead_ms": item.overhead_ms,
+         "cost_ms": float(item.cost_ms[index]),
+         "cost_spread_ms": float(item.cost_spread_ms[index]) if len(item.cost_spread_ms) else None,
+         "overhead_ms": item.overhead_ms,
          "flip_alone": float(item.flip_alone[index]) if len(item.flip_alone) else None,
          "flip_raster": item.flip_raster, "benefit": float(item.benefit[index])}
         for item in candidates for index, name in enumerate(item.names)])
@@ -286,12 +338,15 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
             "mean_heuristic_flip": float(np.mean([row["heuristic_flip"] for row in rows])) if rows else None,
             "mean_oracle_flip": float(np.mean([row["oracle_flip"] for row in rows])) if rows else None,
             "frames_oracle_differs": sum(1 for row in rows if row["oracle"] != row["heuristic"]),
+            "budget_ms": rows[0]["budget_ms"] if rows else None,
         }
     info = run_log._round_json(run_log._json_safe({
-        "every": every, "frames": list(frames), "runs": runs,
+        "every": every, "frames": list(frames), "runs": runs, "timings": TIMINGS,
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
-        "reference, an exact knapsack on measured benefit and cost within each run's own time left"}))
+        f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "
+        "benefit and cost within the budget's nominal time for tracing (budget - the raster run's raster and "
+        "composite ms on that frame), its subset rendered and measured; unweighted by K"}))
     temporary = folder / (ORACLE_JSON + ".tmp")
     temporary.write_text(json.dumps(info, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     os.replace(temporary, folder / ORACLE_JSON)

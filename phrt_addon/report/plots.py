@@ -40,10 +40,10 @@ def _variant_styles(members):
 
 def _plot_curves(axes, group, members, errors, key, ylabel):
     axes.set_title(f"{group[0]} / {group[1]}: {ylabel.split(' against')[0]} against frame time")
-    axes.set_xlabel("mean frame time (ms)")
+    axes.set_xlabel("steady mean frame time, frames after the first (ms)")
     axes.set_ylabel(ylabel)
     axes.grid(True, alpha=0.3)
-    points = [(run, run.mean("total_ms"), errors[id(run)].mean(key)) for run in members]
+    points = [(run, run.steady("mean"), errors[id(run)].mean(key)) for run in members]
     points = [(run, time, error) for run, time, error in points if time is not None and error is not None]
     if not points:
         axes.text(0.5, 0.5, "no error measured for this path\n(see the error table)",

@@ -15,6 +15,7 @@ from . import metrics
 from ..runs import run_log
 from .. import schema
 from ..runs import run_files
+from ..runs import steady
 
 
 ERROR_COLUMNS = ("scene", "path", "run", "mode", "reference", "frame", "flip", "relmse", "psnr_db")
@@ -30,7 +31,9 @@ METRIC_THREADS = max(2, min(4, os.cpu_count() or 1))
 # sweep.csv: the contract's columns first, then what tells the curves apart.
 SWEEP_COLUMNS = ("run", "mode", "cost_mode", "budget_ms", "mean_ms", "p95_ms", "flip", "relmse", "psnr", "regret",
                  "flips_per_100", "popping", "scene", "path", "variant", "budget_at", "selection_weight",
-                 "selection_order", "relevance", "frames", "mean_selected", "regret_frames", "regret_share")
+                 "selection_order", "relevance", "frames", "mean_selected", "regret_frames", "regret_share",
+                 "captured", "captured_lo", "captured_hi", "judged_frames", "min_regret", "beat_oracle",
+                 "p95_over_budget", "within_budget", "first_frame_ms", "variant_name")
 
 
 # The paper's Table II (ms per frame: raster, hybrid, ray tracing) and which of its
@@ -99,6 +102,26 @@ class Run:
     def mean(self, name):
         values = self.column(name)[1]
         return float(values.mean()) if values.size else None
+
+    def steady(self, statistic="mean"):
+        """A steady statistic of the frame time (``runs/steady.py``: frames after the first, one-time
+        work out): ``mean``, ``p50``, ``p95`` or ``max``."""
+        return steady.steady_stats(self.frames)[statistic]
+
+    @property
+    def first_frame_ms(self):
+        return steady.first_frame_ms(self.frames)
+
+    def within_budget(self):
+        """Share of the steady frames whose time met the budget (None without a budget)."""
+        budget = self.summary.get("budget_ms")
+        values = steady.steady_values(self.frames)
+        return float((values <= budget).mean()) if budget and values.size else None
+
+    @property
+    def variant_name(self):
+        """The sweep's name of the run's variant (``measured``, ``error``...: its folder's last part)."""
+        return self.run_dir.name.rsplit("-", 1)[-1] if self.mode == "HYBRID" and self.budget_at is not None else None
 
     def percentile(self, name, q):
         values = self.column(name)[1]

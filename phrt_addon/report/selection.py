@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import oracle, popping
-from ..runs import run_log
+from . import captured, oracle, popping
+from .captured import Captured
+from ..runs import run_log, steady
 from .runs import METRIC_THREADS, SWEEP_COLUMNS
 
 
@@ -67,8 +68,9 @@ class RunRegret:
     heuristic_flip: float | None = None
     oracle_flip: float | None = None
     differs: int = 0
-    overran: int = 0
-    lost_share: float | None = None  # mean (heuristic - oracle) / (raster - oracle) where the oracle gains
+    overran: int = 0  # judged frames whose choice cost, by the oracle's measurements, more than the budget's
+    lost_share: float | None = None  # 1 - captured share
+    judged: Captured = field(default_factory=Captured)  # the captured share over the judged frames
     oracle_only: dict = field(default_factory=dict)
     heuristic_only: dict = field(default_factory=dict)
     note: str = ""
@@ -92,11 +94,10 @@ def run_regrets(runs, results):
         if not rows:
             regrets[id(run)] = RunRegret(note="no sampled frame")
             continue
+        rows = sorted(rows, key=lambda row: row["frame"])
         values = np.array([row["regret"] for row in rows], dtype=float)
-        raster = {int(row["frame"]): float(row["flip_raster"]) for row in results.candidate_rows
-                  if row.get("sweep", results.folder.resolve().parent.name) == run.run_dir.resolve().parent.name}
-        shares = [(row["heuristic_flip"] - row["oracle_flip"]) / (raster[row["frame"]] - row["oracle_flip"])
-                  for row in rows if row["frame"] in raster and raster[row["frame"]] - row["oracle_flip"] > 1e-6]
+        share = captured.measure([row["raster_flip"] for row in rows], [row["heuristic_flip"] for row in rows],
+                                 [row["oracle_flip"] for row in rows])
         oracle_only, heuristic_only = {}, {}
         for row in rows:
             for element in row["oracle_only"]:
@@ -108,10 +109,10 @@ def run_regrets(runs, results):
             heuristic_flip=float(np.mean([row["heuristic_flip"] for row in rows])),
             oracle_flip=float(np.mean([row["oracle_flip"] for row in rows])),
             differs=sum(1 for row in rows if set(row["oracle"]) != set(row["heuristic"])),
-            overran=sum(1 for row in rows if row["capacity_ms"] is not None and row["time_left_ms"] is not None
-                        and row["capacity_ms"] > row["time_left_ms"]),
-            lost_share=float(np.mean(shares)) if shares else None,
-            oracle_only=oracle_only, heuristic_only=heuristic_only)
+            overran=sum(1 for row in rows if row["capacity_ms"] is not None and row["heuristic_cost_ms"] is not None
+                        and row["heuristic_cost_ms"] > row["capacity_ms"] + 1e-9),
+            lost_share=None if share.share is None else 1.0 - share.share,
+            oracle_only=oracle_only, heuristic_only=heuristic_only, judged=share)
     return regrets
 
 
@@ -136,10 +137,11 @@ def sweep_rows(runs, errors, regrets, pops, references):
         hybrid = run.mode == "HYBRID"
         rates = np.array(list(run_log.flips_per_element_per_100(run.selection).values()), dtype=float)
         cost_mode, weight, order, relevance = run.variant
+        share = regret.judged if regret is not None else Captured()
+        budget_ms = run.summary.get("budget_ms") if hybrid else None
         rows.append({
             "run": run.label, "mode": run.mode, "cost_mode": cost_mode if hybrid else None,
-            "budget_ms": run.summary.get("budget_ms") if hybrid else None,
-            "mean_ms": run.mean("total_ms"), "p95_ms": run.percentile("total_ms", 95),
+            "budget_ms": budget_ms, "mean_ms": run.steady("mean"), "p95_ms": run.steady("p95"),
             "flip": outcome.mean("flip"), "relmse": outcome.mean("relmse"), "psnr": outcome.mean("psnr_db"),
             "regret": regret.mean if regret is not None else None,
             "flips_per_100": float(rates.mean()) if rates.size else 0.0,
@@ -152,6 +154,12 @@ def sweep_rows(runs, errors, regrets, pops, references):
             "mean_selected": run.mean("n_selected"),
             "regret_frames": regret.frames if regret is not None else None,
             "regret_share": regret.lost_share if regret is not None else None,
+            "captured": share.share, "captured_lo": share.low, "captured_hi": share.high,
+            "judged_frames": share.judged_frames if regret is not None else None,
+            "min_regret": share.min_regret, "beat_oracle": share.beat_oracle if regret is not None else None,
+            "p95_over_budget": steady.over_budget(run.steady("p95"), budget_ms),
+            "within_budget": run.within_budget() if hybrid else None,
+            "first_frame_ms": run.first_frame_ms, "variant_name": run.variant_name,
         })
     return rows
 

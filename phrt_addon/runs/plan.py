@@ -181,7 +181,7 @@ def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budg
                             budget_at=float(fraction), variant=name, overrides={**BASELINE, **VARIANTS[name]},
                             depends_on=[raster.id, raytrace.id]))
     hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
-    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raytrace.id, *hybrids]))
+    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raster.id, raytrace.id, *hybrids]))
     return Plan(scene=scene, scene_label=scene_label, path=path, frames=[int(frames[0]), int(frames[1])],
                 resolution=[int(resolution[0]), int(resolution[1])], budgets=[float(b) for b in budgets],
                 oracle_every=int(oracle_every), jobs=jobs)

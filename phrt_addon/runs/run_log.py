@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..schema import FRAME_COLUMNS, FRAMES_CSV, REASONS, SELECTION_COLUMNS, SELECTION_CSV, STAGE_COLUMNS, SUMMARY_JSON
+from . import steady
 
 
 log = logging.getLogger(__name__)
@@ -229,7 +230,7 @@ class RunLog:
         self._selection.flush()
         self._frames.write([frame_row])
         self._frames.flush()
-        self._frame_values.append(tuple(frame_row.get(key) for key in FRAME_COLUMNS))
+        self._frame_values.append(tuple(frame_row.get(key) for key in FRAME_COLUMNS + ("setup_ms",)))
         for row in selection_rows:
             element = str(row["element"])
             states = self._selection_states.get(element)
@@ -254,7 +255,7 @@ class RunLog:
             self._close_files()
         except OSError:
             pass  # a CSV could not take its last bytes (a full disk, reported by the writer): its complete rows stay
-        frame_rows = [dict(zip(FRAME_COLUMNS, values)) for values in self._frame_values]
+        frame_rows = [dict(zip(FRAME_COLUMNS + ("setup_ms",), values)) for values in self._frame_values]
         selection_states = [{"frame": frame, "element": element, "selected": bool(selected)}
                             for element, (frames, flags) in self._selection_states.items()
                             for frame, selected in zip(frames, flags)]
@@ -311,18 +312,23 @@ def summarize(frame_rows, selection_rows):
 
     total = column("total_ms")
     frames = [int(row["frame"]) for row in frame_rows]
+    budgets = column("budget_ms")
+    steady_total = steady.steady_stats(frame_rows)
     flips = flips_per_element_per_100(selection_rows)
     rates = np.array(list(flips.values()), dtype=float)
     return {
         "frame_count": len(frame_rows),
         "frame_start": min(frames) if frames else None,
         "frame_end": max(frames) if frames else None,
-        "total_ms": {
+        "total_ms": steady_total,
+        "all_frames_total_ms": {
             "mean": mean(total),
             "p50": float(np.percentile(total, 50)) if total.size else None,
             "p95": float(np.percentile(total, 95)) if total.size else None,
             "max": float(total.max()) if total.size else None,
         },
+        "first_frame_ms": steady.first_frame_ms(frame_rows),
+        "p95_over_budget": steady.over_budget(steady_total["p95"], budgets[0] if budgets.size else None),
         "stage_mean_ms": {name: mean(column(name)) for name in STAGE_COLUMNS},
         "predicted_trace_mean_ms": mean(column("predicted_trace_ms")),
         "mean_n_visible": mean(column("n_visible")),

@@ -73,20 +73,12 @@ def test_negative_measured_drops_count_as_noise_so_a_covering_budget_traces_all(
     assert frame.choose(15.0) == {"e0", "e1", "e2"}
 
 
-def test_the_oracle_may_fill_what_an_overrunning_heuristic_spent():
-    frame = candidates([0.01, 0.002, 0.003], [10.0, 4.0, 4.0])
-    # T = 5 ms, but the heuristic took e1 and e2 (8 ms measured): the oracle gets 8 ms too.
-    assert frame.capacity(5.0, {"e1", "e2"}) == 8.0
-    assert frame.capacity(20.0, {"e1"}) == 20.0
-    assert frame.choose(frame.capacity(5.0, {"e1", "e2"})) == {"e1", "e2"}
-
-
 def test_results_round_trip_and_go_stale_when_a_run_is_redone(tmp_path):
     run = tmp_path / "run-a"
     run.mkdir()
     (run / "summary.json").write_text(json.dumps({"frame_count": 8}))
     frame = candidates([0.02, 0.001], [10.0, 10.0])
-    row = oracle.regret_row("run-a", 8, 12.0, {"e1"}, 0.04, frame.choose(12.0), 0.03, frame)
+    row = oracle.regret_row("run-a", 8, 60.0, 48.0, 9.0, {"e1"}, 0.04, frame.choose(12.0), 0.03, frame)
     assert row["regret"] == pytest.approx(0.01)
     assert row["oracle_only"] == "e0" and row["heuristic_only"] == "e1"
     info = oracle.write_results(tmp_path / "oracle", 8, [8], [frame], [row], {"run-a": run})

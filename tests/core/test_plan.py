@@ -33,7 +33,7 @@ def test_plan_has_raster_and_raytrace_then_every_budget_in_every_variant_then_th
     assert {job.overrides["selection_order"] for job in hybrids} == {"RELEVANCE", "RELEVANCE_PER_MS"}
     assert all(job.depends_on == ids[:2] for job in hybrids)
     oracle_job = built.jobs[-1]
-    assert oracle_job.kind == "oracle" and set(oracle_job.depends_on) == {ids[1], *(job.id for job in hybrids)}
+    assert oracle_job.kind == "oracle" and set(oracle_job.depends_on) == {ids[0], ids[1], *(job.id for job in hybrids)}
 
 
 def test_plan_json_round_trips(tmp_path):

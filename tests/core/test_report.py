@@ -99,9 +99,9 @@ def test_report_writes_every_file(three_modes):
 def test_table_ii_has_mean_ms_per_mode_per_path_and_the_papers_ratios(three_modes):
     _, _, files = three_modes
     markdown = files.markdown.read_text()
-    # total_ms = base + frame, frames 1-4: mean = base + 2.5.  Ratios: ours 102.5 / 22.5 and
-    # 402.5 / 102.5; the paper's atrium path 1: 165.4 / 26.7 and 340.4 / 165.4.
-    assert ("| atrium | path1 | 22.5 | 102.5 | 402.5 | 4.56 | 6.19 | 3.93 | 2.06 | atrium-path1-hybrid |"
+    # total_ms = base + frame, frames 1-4: the steady mean (frames 2-4) = base + 3.  Ratios: ours 103 / 23
+    # and 403 / 103; the paper's atrium path 1: 165.4 / 26.7 and 340.4 / 165.4.
+    assert ("| atrium | path1 | 23.0 | 103.0 | 403.0 | 4.48 | 6.19 | 3.91 | 2.06 | atrium-path1-hybrid |"
             in markdown)
 
 
@@ -184,7 +184,7 @@ def test_errors_only_against_the_reference_of_the_same_path(tmp_path):
     files = report.build_report(runs, out_dir=tmp_path / "report")
     assert {row["run"] for row in read_errors(files.errors_csv)} == {"p1-hybrid"}
     markdown = files.markdown.read_text()
-    assert "| atrium | path2 | – | 102.5 | – |" in markdown
+    assert "| atrium | path2 | – | 103.0 | – |" in markdown
     line = row_of(section(markdown, "Error against the reference"), "| p2-hybrid |")
     assert line.endswith("| – | – | – | no reference run for this path: error not measured |")
 

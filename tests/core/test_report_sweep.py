@@ -67,7 +67,8 @@ def sweep(tmp_path_factory):
     # An oracle folder for three of the four hybrid runs (the last is 'not in the oracle').
     candidates = oracle.FrameCandidates(frame=4, names=["Mirror"], cost_ms=np.array([3.0]),
                                         benefit=np.array([0.05]), flip_raster=0.06)
-    rows = [oracle.regret_row(run.name, 4, 5.0, set(), 0.03 + index * 0.01, {"Mirror"}, 0.01, candidates)
+    rows = [oracle.regret_row(run.name, 4, 40.0, 35.0, 5.0, set(), 0.03 + index * 0.01, {"Mirror"}, 0.01,
+                              candidates)
             for index, run in enumerate(runs[2:5])]
     oracle.write_results(root / "oracle", 4, [4], [candidates], rows, {run.name: run for run in runs[2:5]})
     files = report.build_report(runs, out_dir=root / "report")
@@ -94,9 +95,14 @@ def test_sweep_csv_has_the_contract_columns_and_one_row_per_run(sweep):
     assert [row["run"] for row in rows] == [run.name for run in runs]
     hybrid = next(row for row in rows if row["run"] == "arcade-path1-hybrid-at0.25-measured")
     assert float(hybrid["budget_ms"]) == 40.0 and float(hybrid["budget_at"]) == 0.25
-    assert float(hybrid["mean_ms"]) == pytest.approx(42.5) and float(hybrid["regret"]) == pytest.approx(0.02)
-    # The oracle gains 0.06 - 0.01 over raster; the heuristic lost 0.02 of it.
-    assert float(hybrid["regret_share"]) == pytest.approx(0.4)
+    # Steady: frames 2-4 of total_ms = 40 + frame; the first frame (41) on its own.
+    assert float(hybrid["mean_ms"]) == pytest.approx(43.0) and float(hybrid["first_frame_ms"]) == pytest.approx(41.0)
+    assert float(hybrid["p95_over_budget"]) == pytest.approx(43.9 / 40.0)
+    assert float(hybrid["regret"]) == pytest.approx(0.02)
+    # The oracle gains 0.06 - 0.01 over raster; the heuristic got 0.03 of it and lost 0.02.
+    assert float(hybrid["captured"]) == pytest.approx(0.6) and float(hybrid["regret_share"]) == pytest.approx(0.4)
+    assert int(hybrid["judged_frames"]) == 1 and hybrid["captured_lo"] == ""  # one frame: no interval
+    assert hybrid["variant_name"] == "measured"
     raster = next(row for row in rows if row["mode"] == "RASTER")
     assert raster["budget_ms"] == "" and raster["regret"] == "" and float(raster["flip"]) > float(hybrid["flip"])
 
@@ -142,17 +148,18 @@ def test_relevance_comparison_names_the_winner(sweep):
     _, _, files = sweep
     markdown = files.markdown.read_text()
     assert "## Paper relevance against error-aware relevance: arcade / path1" in markdown
-    assert "the error-aware relevance wins: mean LDR-FLIP over the 2 budget(s)" in markdown  # half the error
+    # Half the error, but one judged frame per run gives no interval: no difference is declared.
+    assert "no difference at any of the 2 budget(s)" in markdown and "wins" not in markdown
     assert "the error-aware R is lower at 2 and higher at 0 of them" in markdown
 
 
 def test_table_ii_shows_the_paper_heuristic_beside_the_papers_sponza_ratios(sweep):
     _, _, files = sweep
     row = markdown_table(files.markdown.read_text(), "Render times (ms per frame), after the paper's Table II")[0]
-    # The baseline at the budget nearest 0.4 (0.25): 42.5 ms; raster 22.5, raytrace 102.5.
+    # The baseline at the budget nearest 0.4 (0.25): 43 ms steady; raster 23, raytrace 103.
     assert row["Hybrid run"] == "arcade-path1-hybrid-at0.25-measured"
-    assert (row["Raster rendering"], row["Hybrid rendering"], row["Ray tracing rendering"]) == ("22.5", "42.5", "102.5")
-    assert row["Hybrid / raster"] == "1.89" and row["Ray tracing / hybrid"] == "2.41"
+    assert (row["Raster rendering"], row["Hybrid rendering"], row["Ray tracing rendering"]) == ("23.0", "43.0", "103.0")
+    assert row["Hybrid / raster"] == "1.87" and row["Ray tracing / hybrid"] == "2.40"
     assert row["Paper: hybrid / raster"] == "6.72" and row["Paper: ray tracing / hybrid"] == "3.54"  # Sponza path 1
 
 
@@ -173,3 +180,24 @@ def test_every_plot_has_titles_and_labelled_axes_with_units(sweep):
     legend = [text.get_text() for text in curves[0].get_legend().get_texts()]
     assert {"paper R, measured cost, I=0.5", "error-aware R, measured cost, I=0.5", "raster",
             "ray traced (reference)", "Pareto front"} <= set(legend)
+
+
+def test_the_report_leads_with_the_curve_and_the_variants_per_budget(sweep):
+    _, _, files = sweep
+    markdown = files.markdown.read_text()
+    assert markdown.index("error_vs_time.png") < markdown.index("## Results: arcade / path1") \
+        < markdown.index("## Render times") < markdown.index("## Runs\n")
+    rows = markdown_table(markdown, "Results: arcade / path1")
+    measured = next(row for row in rows if row["Variant"] == "measured" and row["Budget at"] == "0.25")
+    assert measured["Budget ms"] == "40" and measured["Captured [90%]"] == "0.60" and measured["Judged frames"] == "1"
+    assert "measured against error: no difference" in markdown
+
+
+def test_variants_differ_only_when_their_intervals_do_not_overlap():
+    from phrt.phrt_addon.report import results
+    row = {"mode": "HYBRID", "variant": "x", "captured_lo": 0.5, "captured_hi": 0.7, "captured": 0.6}
+    overlapping = [{**row, "variant_name": "measured"},
+                   {**row, "variant_name": "benefit", "captured": 0.66, "captured_lo": 0.61, "captured_hi": 0.8}]
+    assert results.verdicts(overlapping) == ["measured against benefit: no difference"]
+    apart = [overlapping[0], {**overlapping[1], "captured": 0.85, "captured_lo": 0.75, "captured_hi": 0.93}]
+    assert results.verdicts(apart) == ["measured against benefit: benefit captures more"]

@@ -132,7 +132,10 @@ def test_summary_has_statistics_versions_and_machine(tmp_path):
     assert summary["scene"] == "atrium" and summary["path"] == "path1"
     assert summary["mode"] == "HYBRID" and summary["resolution"] == [64, 48]
     assert summary["budget_ms"] == 150.0 and summary["frame_count"] == 5
-    assert summary["total_ms"] == {"mean": 40.0, "p50": 30.0, "p95": 88.0, "max": 100.0}
+    # Steady (frames 2-5), the first frame on its own, all frames beside.
+    assert summary["total_ms"] == {"mean": 47.5, "p50": 35.0, "p95": 91.0, "max": 100.0}
+    assert summary["first_frame_ms"] == 10.0 and summary["p95_over_budget"] == pytest.approx(91.0 / 150.0)
+    assert summary["all_frames_total_ms"] == {"mean": 40.0, "p50": 30.0, "p95": 88.0, "max": 100.0}
     assert summary["stage_mean_ms"] == {"raster_ms": 3.0, "select_ms": 1.0, "trace_ms": 70.0,
                                         "composite_ms": 9.0}
     assert summary["selection_flips_per_element_per_100_frames"]["per_element"] == {"Sphere": 80.0}

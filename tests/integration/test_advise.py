@@ -85,7 +85,8 @@ def test_benefit_per_ms_is_the_oracles_own_measurement_on_the_same_frames(advise
     mirror = next(item for item in document["items"] if item["item"] == "Mirror/reflections")
     reference_dir = out / advise.RUNS_DIR / "reference"
     hybrid = next((out / advise.RUNS_DIR).glob("hybrid-paper-*"))
-    info = oracle_engine.run_oracle(scene, camera, reference_dir, {"paper": hybrid}, out / "oracle", every=1)
+    info = oracle_engine.run_oracle(scene, camera, reference_dir, {"paper": hybrid}, out / "oracle", every=1,
+                                    raster_dir=out / advise.RUNS_DIR / "raster")
     oracle_rows = [row for row in oracle.read_csv(out / "oracle" / oracle.CANDIDATES_CSV)
                    if row["element"] == "Mirror"]
     by_frame = {int(row["frame"]): float(row["benefit"]) for row in oracle_rows}

@@ -159,7 +159,12 @@ def test_user_installs_zip_and_renders(tmp_path):
     assert build.returncode == 0, build.stdout + build.stderr
     zip_path = next(dist.glob("phrt-*-linux_x64.zip"))
     import zipfile
-    bundled = [name for name in zipfile.ZipFile(zip_path).namelist() if name.startswith("wheels/")]
+    files = zipfile.ZipFile(zip_path).namelist()
+    # the extension ships its engine, UI and the command line, not the demo, the paper runner or benches
+    assert {"__init__.py", "engine/__init__.py", "cli/__init__.py", "phrt_addon/frame.py"} <= set(files)
+    assert not [name for name in files if name in ("cli/demo.py", "cli/paper.py", "cli/bench.py")
+                or name.startswith(("benchmarks/", "tests/", "tools/", "docs/"))]
+    bundled = [name for name in files if name.startswith("wheels/")]
     assert any("embreex" in name for name in bundled)
     assert not [name for name in bundled if any(optional in name.lower() for optional in ("dask", "distributed", "bokeh"))]
     script = tmp_path / "install.py"
