@@ -34,7 +34,8 @@ def plot_benefit_per_ms(path, rows, title):
     axes.set_yticklabels(labels, fontsize=8)
     top = max(values) if values and max(values) > 0 else 1.0
     for position, value, row in zip(positions, values, rows):
-        axes.text(value + 0.01 * top, position, row["recommendation"], va="center", fontsize=7)
+        label = row["recommendation"] if row["tagged"] or row["recommendation"] != "keep" else "leave untagged"
+        axes.text(value + 0.01 * top, position, label, va="center", fontsize=7)
     axes.set_xlim(0, top * 1.25)
     axes.set_xlabel("benefit per ms: mean LDR-FLIP removed per ms of tracing (traced alone)")
     axes.set_title(title, fontsize=10)
