@@ -1,9 +1,10 @@
 """Shading: one physically plausible BRDF for raster lighting and ray hits alike.
 
-Deferred lighting runs here in numpy on the read-back G-buffer (raster, hybrid
-and raytrace frames), and the tracer shades its hits with the same functions,
-so "raster" and "traced" differ only in visibility and in what the specular
-lobe sees - never in the BRDF.
+The frame's deferred lighting runs on the GPU (GLSL twins of these functions in
+``engine/shaders.py``); here the same equations serve the tracer's hits and the
+numpy reference raster (``raster/reference_raster.py``) the GLSL is tested
+against, so "raster" and "traced" differ only in visibility and in what the
+specular lobe sees - never in the BRDF.
 
 BRDF: Lambert diffuse weighted by (1 - metallic)(1 - transmission), plus
 GGX / Smith (Schlick-GGX) / Schlick-Fresnel specular with F0 = mix(F0(ior),
