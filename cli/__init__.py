@@ -9,6 +9,7 @@
                      [--workers N [--dashboard ADDRESS] | --scheduler ADDRESS [--tls-ca-file F
                      --tls-cert F --tls-key F]]
     phrt rescore SWEEP_DIR [--out DIR]
+    phrt advise SCENE [--path NAME] [--frames A-B] [--budget-at F,F...] [--resolution WxH] [--out DIR]
 
 Runs Blender as the ``bpy`` module with the PHRT add-on registered from this
 package; ``render`` goes through the same replay code as the
@@ -32,6 +33,7 @@ from .blender_process import blender as _blender
 from .blender_process import import_blender as _import_blender
 from .blender_process import quiet_exit as _quiet_exit
 from .blender_process import quiet_stdout as _quiet_stdout
+from . import advise as advise_command
 from .rescore import command_rescore
 
 
@@ -98,6 +100,7 @@ def build_parser():
     for flag, what in (("--tls-ca-file", "CA certificate(s)"), ("--tls-cert", "this client's certificate"),
                        ("--tls-key", "this client's private key")):
         sweep.add_argument(flag, metavar="FILE", help=f"{what} (PEM) for a tls:// --scheduler (docs/cluster.md)")
+    advise_command.add_parser(commands)
     return parser
 
 
@@ -372,7 +375,8 @@ def main(argv=None):
         if args.command not in ("report", "rescore"):  # every other command runs Blender
             _import_blender()
         command = {"scenes": command_scenes, "render": command_render, "report": command_report,
-                   "rescore": command_rescore, "sweep": command_sweep}[args.command]
+                   "rescore": command_rescore, "sweep": command_sweep,
+                   "advise": lambda parsed: advise_command.command_advise(parsed, parse_resolution)}[args.command]
         return command(args)
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)

@@ -4,16 +4,21 @@
   (sub-panel) the active material's; both copy to the selection in one click.
 - Candidates: every element with K and the last frame's R and decision; the overlay.
 - Replay: a camera path over a frame range in several modes; export the selection log.
+- Advisor: what each tag is worth per ms along the active camera's path, one recommendation per
+  (element, effect) item, applied in one click (one undo step);
 - Last Render: timings of the last frame and the problems it reported (skipped objects).
 
 Every panel shares ``PHRT_Panel``: shown only when the render engine is PHRT.  The scene's
 renderer settings are in Properties > Render (``panels/render.py``).
 """
 
+import textwrap
+
 import bpy
 
 from ..engine import candidate_list, session, viewport
 from ..engine.runs import camera_path
+from ..operators import advisor
 from . import candidates
 
 
@@ -186,7 +191,7 @@ class PHRT_PT_last_render(PHRT_Panel, bpy.types.Panel):
     """The last rendered frame: stage timings and the problems it reported."""
 
     bl_label = "Last Render"
-    bl_order = 4
+    bl_order = 5
 
     def draw(self, context):
         layout = self.layout
@@ -213,9 +218,56 @@ class PHRT_PT_last_render(PHRT_Panel, bpy.types.Panel):
             column.label(text=problem)
 
 
-PANELS = (PHRT_PT_element, PHRT_PT_element_material, PHRT_PT_candidates, PHRT_PT_replay,
+class PHRT_UL_advice(bpy.types.UIList):
+    """The last advice's items: element / effect, its recommendation, benefit per ms."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
+        row = layout.row(align=True)
+        row.label(text=f"{item.element} / {item.effect}", icon="OBJECT_DATA" if item.tagged else "GHOST_ENABLED")
+        row.label(text=item.recommendation.replace("_", " ") + (" (applied)" if item.applied else ""),
+                  icon=advisor.ICONS.get(item.recommendation, "QUESTION"))
+
+
+class PHRT_PT_advisor(PHRT_Panel, bpy.types.Panel):
+    """The tagging Advisor for the active camera's path."""
+
+    bl_label = "Advisor"
+    bl_order = 4
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        window_manager = context.window_manager
+        camera = context.scene.camera
+        layout.label(text=f"Path: {camera.name}" if camera else "No active camera", icon="CAMERA_DATA")
+        row = layout.row()
+        row.scale_y = 1.2
+        row.operator("phrt.advise_path", icon="VIEWZOOM")
+        items = window_manager.phrt_advice
+        if not len(items):
+            layout.label(text="Run the advice to list each tag's worth", icon="INFO")
+            return
+        layout.template_list("PHRT_UL_advice", "", window_manager, "phrt_advice", window_manager,
+                             "phrt_advice_index", rows=5)
+        index = window_manager.phrt_advice_index
+        if 0 <= index < len(items):
+            item = items[index]
+            box = layout.box()
+            box.label(text=f"{item.recommendation.replace('_', ' ')}: {item.benefit_per_ms:.5f} LDR-FLIP per ms",
+                      icon=advisor.ICONS.get(item.recommendation, "QUESTION"))
+            column = box.column(align=True)
+            for line in textwrap.wrap(item.reason, 60):
+                column.label(text=line)
+            row = box.row()
+            row.enabled = item.recommendation != "keep" and not item.applied
+            row.operator("phrt.apply_advice", icon="CHECKMARK").index = index
+        if window_manager.phrt_advice_folder:
+            layout.label(text=window_manager.phrt_advice_folder, icon="FILE_FOLDER")
+
+
+PANELS = (PHRT_PT_element, PHRT_PT_element_material, PHRT_PT_candidates, PHRT_PT_replay, PHRT_PT_advisor,
           PHRT_PT_last_render)
-CLASSES = PANELS
+CLASSES = (PHRT_UL_advice, *PANELS)
 
 
 def register():

@@ -16,6 +16,7 @@ import numpy as np
 from ...phrt_addon.report import metrics, oracle
 from ...phrt_addon.runs import run_files
 from .. import extract, final
+from . import item_measure
 
 
 class ForcedRenderer:
@@ -74,22 +75,6 @@ def _selection_by_frame(run_dir):
     return chosen
 
 
-def _trace_ms(stats) -> float:
-    """The trace stage's measured ms without one-time Embree uploads."""
-    return max(float(stats["trace_ms"]) - float(stats.get("upload_ms") or 0.0), 0.0)
-
-
-def _timed(renderer, frame, names):
-    """(image, median trace ms, spread ms, selection) of ``oracle.TIMINGS`` renders of one subset
-    (the images are the same: the first is kept)."""
-    image, stats, selection = renderer.render(frame, names)
-    timings = [_trace_ms(stats)]
-    for _ in range(oracle.TIMINGS - 1):
-        timings.append(_trace_ms(renderer.render(frame, names)[1]))
-    median, spread = oracle.median_ms(timings)
-    return image, median, spread, selection
-
-
 def _budget_groups(runs):
     """{budget ms: [labels]}: the hybrid runs judged by one oracle (their budget, rounded to 0.1 ms)."""
     groups = {}
@@ -139,20 +124,20 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 capped[str(frame)] = [len(names), len(competing)]
             cost, spread, alone, area = [], [], [], []
             rendered = {frozenset(): (raster, 0.0)}  # subset -> (image, its measured trace ms)
-            for name in names:
-                image, median, timing_spread, _ = _timed(renderer, frame, (name,))
-                rendered[frozenset((name,))] = (image, median)
-                cost.append(median)
-                spread.append(timing_spread)
-                alone.append(metrics.flip(reference, image))
+            for name in names:  # the advisor's items are measured by the same function
+                traced = item_measure.measure_subset(renderer, frame, (name,), reference)
+                rendered[frozenset((name,))] = (traced.image, traced.trace_ms)
+                cost.append(traced.trace_ms)
+                spread.append(traced.spread_ms)
+                alone.append(traced.flip)
                 area.append(int(selection.elements.area_px[selection.names.index(name)]))
             alone = np.array(alone, dtype=np.float64)
             cost = np.array(cost, dtype=np.float64)
             overhead = 0.0
             if len(names) > 1:  # all together: the trace stage's fixed part, paid once per frame
-                image, together, _, _ = _timed(renderer, frame, names)
-                rendered[frozenset(names)] = (image, together)
-                overhead = oracle.trace_overhead_ms(cost, together)
+                together = item_measure.measure_subset(renderer, frame, names)
+                rendered[frozenset(names)] = (together.image, together.trace_ms)
+                overhead = oracle.trace_overhead_ms(cost, together.trace_ms)
             candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=cost - overhead,
                                                 benefit=flip_raster - alone, flip_raster=flip_raster,
                                                 flip_alone=alone, area_px=np.array(area), overhead_ms=overhead,
@@ -163,7 +148,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 oracle_set = candidates.choose(oracle.nominal_time_left(budget, shared))
                 if oracle_set not in rendered:  # rendered and measured even when a run chose the same
                     image, stats, _ = renderer.render(frame, oracle_set)
-                    rendered[oracle_set] = (image, _trace_ms(stats))
+                    rendered[oracle_set] = (image, item_measure.trace_ms(stats))
                 if oracle_set not in flips:
                     flips[oracle_set] = metrics.flip(reference, rendered[oracle_set][0])
                 for label in labels:
