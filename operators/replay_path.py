@@ -10,7 +10,7 @@ Two ways to run, same files:
 - From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
   ``engine.runs.replay.replay()`` runs every frame of every mode to the end.
 
-The modal path drives ``engine.runs.replay.SteppedReplay`` (of which ``replay()`` is the
+The modal path drives ``engine.runs.replay.ReplayRun`` (of which ``replay()`` is the
 blocking loop), so both write exactly the same files.
 docs/batch.md has the ``blender -b`` command lines.
 """
@@ -25,7 +25,6 @@ from ..engine.runs import replay
 from ..engine.runs import camera_path
 from ..properties import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_FLAG_ITEMS
 from ..phrt_addon.runs import run_files
-from ..engine.runs.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
 
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
@@ -192,7 +191,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
         try:
             if self._run is None:
                 mode = self._modes[self._mode_index]
-                self._run = SteppedReplay(context.scene, self._camera, self._frame_range, mode,
+                self._run = replay.ReplayRun(context.scene, self._camera, self._frame_range, mode,
                                           self._run_dir(context, self._camera, mode, self._root),
                                           images=self.images.lower(), scene_label=scene_label(context.scene),
                                           overwrite=self.overwrite)
@@ -206,7 +205,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                 self._mode_index += 1
                 if self._mode_index == len(self._modes):
                     return self._stop(context, cancelled=False)
-        except ReplayInterrupted:  # Esc while a frame was rendering
+        except replay.ReplayInterrupted:  # Esc while a frame was rendering
             return self._stop(context, cancelled=True)
         except (camera_path.ReplayError, RuntimeError) as error:
             self._run = None  # step() already closed its logs and restored the scene

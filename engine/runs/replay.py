@@ -7,7 +7,7 @@ A camera path is an animated camera object; its frame range is its
 animation's (keyframes, or the scene range for a Follow Path constraint).
 Frames are rendered one ``render.render()`` call at a time, with the state a
 replay carries (Embree scenes uploaded once, cost model, last selection) held
-by a ``ReplaySession``; after each frame the image is written and the logs are
+by a ``ReplayState``; after each frame the image is written and the logs are
 flushed, so a cancelled replay leaves complete frames and logs only.
 
 A run folder has one writer (``.phrt-lock``, ``runs/lock.py``): a second replay into a live
@@ -88,10 +88,11 @@ class ReplayInterrupted(ReplayError):
     """The frame's render was stopped (Esc during a render): nothing of it was kept."""
 
 
-class SteppedReplay:
-    """A replay one frame per ``step()`` (the modal operator); ``replay()`` loops over it.
+class ReplayRun:
+    """One replay of a camera path into one RUN_DIR, rendered a frame per ``step()`` (the modal
+    operator steps it from a timer; ``replay()`` loops over it).
 
-    ``run = SteppedReplay(...)``; ``while run.remaining: run.step()``;
+    ``run = ReplayRun(...)``; ``while run.remaining: run.step()``;
     ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
     An exception in ``step()`` restores the scene and leaves the complete rows
     written so far (like ``replay()``); ``ReplayInterrupted`` (the render itself was
@@ -126,7 +127,7 @@ class SteppedReplay:
         if budget_ms is None and fraction is not None and mode == "HYBRID":
             from . import calibration as budget_module
             resolved = budget_module.resolve(
-                scene, camera, frame_range, fraction, runner=SteppedReplay, resolution=resolution,
+                scene, camera, frame_range, fraction, runner=ReplayRun, resolution=resolution,
                 scene_label=scene_label,
                 search_dirs=[Path(run_dir).parent] if budget_search_dirs is None else budget_search_dirs)
             budget_ms = resolved.budget_ms
@@ -196,7 +197,7 @@ class SteppedReplay:
             self._lock.release()
             self._restore()
             raise
-        self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
+        self.state = final.ReplayState(settings_override=self.settings, camera=camera).__enter__()
         self._open = True
 
     @property
@@ -210,9 +211,9 @@ class SteppedReplay:
     def step(self) -> dict:
         """Render, write and log the next frame; returns its stats."""
         if not self._open or not self.remaining:
-            raise ValueError("SteppedReplay: no frame left to render")
+            raise ValueError("ReplayRun: no frame left to render")
         frame = self.frames[self.done]
-        scene, render, session = self.scene, self.scene.render, self.session
+        scene, render, state = self.scene, self.scene.render, self.state
         try:
             scene.frame_set(frame)
             if not self._budget_fixed:
@@ -223,7 +224,7 @@ class SteppedReplay:
             with captured_stderr() as blender_said:
                 bpy.ops.render.render(write_still=self.images != "none")
             wall_ms = (time.perf_counter() - begin) * 1000.0
-            result = session.last_result
+            result = state.last_result
             if result is None:  # a failed render raises RuntimeError: this one was stopped
                 self._drop_partial_images(frame)
                 raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
@@ -234,7 +235,7 @@ class SteppedReplay:
             row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
             self.log.add_frame(row, result.selection_rows)
-            session.last_result = None
+            state.last_result = None
         except ReplayInterrupted:
             raise
         except OSError as error:  # a full disk or a file-size limit while writing the logs
@@ -286,7 +287,7 @@ class SteppedReplay:
         """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
         the scene (``restore_scene=False`` when Blender is discarding it)."""
         if not self._open:
-            raise ValueError("SteppedReplay: already finished")
+            raise ValueError("ReplayRun: already finished")
         cancelled = bool(cancelled and self.remaining)
         problems = self.problem_lines()
         written = self._close(summary={**self._run_facts(), "cancelled": cancelled, "partial": bool(self.remaining)},
@@ -296,11 +297,11 @@ class SteppedReplay:
 
     def problem_lines(self) -> list:
         """Each problem of the run once, with the number of frames it came up on."""
-        return self.session.renderer.problems.lines(self.done)
+        return self.state.renderer.problems.lines(self.done)
 
     def _run_facts(self) -> dict:
         return {**self._summary, "frames_planned": self.total,
-                "problems": self.session.renderer.problems.summary()}
+                "problems": self.state.renderer.problems.summary()}
 
     def _close(self, summary, restore_scene=True):
         if not self._open:
@@ -311,7 +312,7 @@ class SteppedReplay:
             written = self.log.close(summary)
         finally:
             self._lock.release()
-            self.session.__exit__(None, None, None)
+            self.state.__exit__(None, None, None)
             if restore_scene:
                 self._restore()
         return written
@@ -350,7 +351,7 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
     ``summary.json`` (``budget_source``).  ``overrides`` sets fields of the scene's settings
     (``phrt_addon.scene.Settings``) for this replay only.  ``overwrite`` lets the replay replace
     another run in ``run_dir`` (its files are removed first); without it such a folder is refused."""
-    run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
+    run = ReplayRun(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
                         resolution=resolution, scene_label=scene_label, budget_at=budget_at,
                         budget_search_dirs=budget_search_dirs, overrides=overrides, overwrite=overwrite)
     cancelled = False

@@ -493,13 +493,12 @@ def test_cancelled_replay_keeps_complete_frames_and_logs(scene, tmp_path):
 
 def test_stepped_replay_cancelled_by_esc_keeps_what_was_rendered(scene, tmp_path):
     """The modal operator's path: one frame per timer tick, Esc -> finish(cancelled=True)."""
-    from phrt.operators.replay_path import SteppedReplay
     filepath = scene.render.filepath
-    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "HYBRID", tmp_path / "run", scene_label="showcase")
+    run = replay.ReplayRun(scene, scene.camera, (1, PATH_FRAMES), "HYBRID", tmp_path / "run", scene_label="showcase")
     for _ in range(3):
         run.step()
     assert run.remaining == PATH_FRAMES - 3
-    assert final.active_replay() is run.session  # between ticks the session stays active
+    assert final.active_replay() is run.state  # between ticks the replay's state stays active
     result = run.finish(cancelled=True)
     assert result.cancelled and result.frames_done == 3 and final.active_replay() is None
     _, _, summary = check_run(tmp_path / "run", [1, 2, 3], "HYBRID")
@@ -511,12 +510,11 @@ def test_stepped_replay_stopped_during_a_render_drops_that_frame(scene, tmp_path
     """Esc while a frame renders: the engine returns without a result (test_break); the
     frame's rows are dropped, the frames before it stay complete.  (Without images: an
     engine that writes no result and write_still=True crashes Blender 5.0.1 in background.)"""
-    from phrt.operators.replay_path import ReplayInterrupted, SteppedReplay
-    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
+    run = replay.ReplayRun(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
     run.step()
     run.step()
     monkeypatch.setattr(final.FinalRender, "render", lambda self, depsgraph: None)
-    with pytest.raises(ReplayInterrupted):
+    with pytest.raises(replay.ReplayInterrupted):
         run.step()
     assert run.done == 2
     run.finish(cancelled=True)
@@ -525,8 +523,7 @@ def test_stepped_replay_stopped_during_a_render_drops_that_frame(scene, tmp_path
 
 
 def test_stepped_replay_closed_by_blender_leaves_the_scene_alone(scene, tmp_path):
-    from phrt.operators.replay_path import SteppedReplay
-    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
+    run = replay.ReplayRun(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
     run.step()
     run.finish(cancelled=True, restore_scene=False)
     assert scene.render.engine == "PHRT" and scene.frame_current == 1  # as the replay left it
@@ -534,9 +531,8 @@ def test_stepped_replay_closed_by_blender_leaves_the_scene_alone(scene, tmp_path
 
 
 def test_stepped_replay_writes_what_replay_writes(scene, tmp_path):
-    from phrt.operators.replay_path import SteppedReplay
     replay.replay(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "blocking", images="none")
-    run = SteppedReplay(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "stepped", images="none")
+    run = replay.ReplayRun(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "stepped", images="none")
     while run.remaining:
         run.step()
     run.finish()
