@@ -23,7 +23,6 @@ from ..phrt_addon.problems import ProblemLog
 from ..phrt_addon.schema import PASS_FIELDS
 from . import extract, session
 from .gpu.frame import GPUFrame
-from .session import last_frame  # noqa: F401 (the UI's accessor, re-exported for scripts and tests)
 
 
 def log_exception(error):

@@ -132,7 +132,7 @@ def render_frames(scene, frames, mode="RASTER"):
             change()
             bpy.ops.render.render()
             counts.append(dict(session.current().resources.created, upload=session.current().resources.uploads))
-            stats.append(dict(final.last_frame().stats))
+            stats.append(dict(session.last_frame().stats))
     return counts, stats
 
 

@@ -42,7 +42,7 @@ def scene():
     """The showcase at 160x120 with its camera keyframed over frames 1-30."""
     scene = build_showcase(WIDTH, HEIGHT)
     animate_camera(scene.camera, PATH_FRAMES)
-    final.last_frame().clear()
+    session.last_frame().clear()
     return scene
 
 
@@ -80,7 +80,7 @@ def rgb(channels):
 
 
 def row_of(element, rows=None):
-    rows = final.last_frame().rows if rows is None else rows
+    rows = session.last_frame().rows if rows is None else rows
     return next(row for row in rows if row["element"] == element)
 
 
@@ -281,7 +281,7 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     mirror = bpy.data.objects["MirrorSphere"]
     bpy.context.view_layer.objects.active = mirror
     mirror.select_set(True)
-    final.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
+    session.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
     for panel in view3d.PANELS:
         assert hasattr(bpy.types, panel.__name__), f"{panel.__name__} is not registered"
         assert panel.bl_category == "PHRT" and panel.bl_space_type == "VIEW_3D" and panel.bl_region_type == "UI"
@@ -313,7 +313,7 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     assert ("label", "Object 'Broken' skipped: no geometry") not in logs["PHRT_PT_last_render"]  # a new frame
     assert ("label", "No problems") in logs["PHRT_PT_last_render"]
 
-    final.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
+    session.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
     assert ("label", "Object 'Broken' skipped: no geometry") in draw_panel(view3d.PHRT_PT_last_render, context)
 
     from phrt.panels import candidates
@@ -555,7 +555,7 @@ def test_export_selection_log_round_trips_csv_and_json(scene, tmp_path):
     with pytest.raises(RuntimeError, match="render a frame with PHRT first"):
         bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "empty.csv"))
     bpy.ops.render.render()
-    rows = final.last_frame().rows
+    rows = session.last_frame().rows
     assert bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "log.csv")) == {"FINISHED"}
     assert bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "log.JSON")) == {"FINISHED"}
 
@@ -615,7 +615,7 @@ def test_overlay_colors_follow_the_last_decisions():
 def test_overlay_boxes_surround_the_candidates_of_the_last_frame(scene):
     bpy.data.materials["Red"].phrt.candidate = True
     bpy.ops.render.render()
-    colors = viewport.overlay_colors(final.last_frame().rows)
+    colors = viewport.overlay_colors(session.last_frame().rows)
     assert set(colors) == {"MirrorSphere", "GlassSlab", "Fence", "RedCube/Red"}
     boxes = viewport.overlay_boxes(bpy.context.evaluated_depsgraph_get(), colors)
     assert len(boxes) == 4
