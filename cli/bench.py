@@ -150,7 +150,7 @@ def gpu_frame_bench(frames="200-259", scenes=("arcade", "atrium"), out=print):
             hybrid_ms, hybrid_p95 = _mean(runs["HYBRID"], "total_ms"), _p95(runs["HYBRID"], "total_ms")
             out(f"\nGPU frame: {label}/{camera.name} frames {frames} at 640x480 (means over frames 2+, "
                 f"one-time work taken out)")
-            gbuffer, lighting = _mean(runs["RASTER"], "gbuffer_ms"), _mean(runs["RASTER"], "lighting_ms")
+            gbuffer, lighting = _mean(runs["RASTER"], "gbuffer_ms"), _mean(runs["RASTER"], "composite_ms")
             out(f"  raster: {raster_ms:.1f} ms/frame (wall {_mean(runs['RASTER'], 'wall_ms'):.1f}); "
                 f"G-buffer pass {gbuffer:.1f} ms, lighting + composite {lighting:.1f} ms: "
                 f"lighting/G-buffer {lighting / gbuffer:.2f} (target <= 1)")

@@ -75,7 +75,7 @@ def main(argv=None):
                   f"{statistics.median(v[1] for v in values):6.1f}  ({len(values)} calls)")
     print("run means (frames 2+, one-time work out):", ", ".join(
         f"{key[:-3]} {bench._mean(rows, key):.1f}" for key in
-        ("total_ms", "wall_ms", "gbuffer_ms", "lighting_ms", "select_ms", "trace_ms", "readback_ms")))
+        ("total_ms", "wall_ms", "gbuffer_ms", "composite_ms", "select_ms", "trace_ms", "readback_ms")))
     totals = [row["total_ms"] for row in rows]
     if args.budget_ms:
         print(f"budget {args.budget_ms:.1f}: mean {statistics.mean(totals) / args.budget_ms:.3f}x, "

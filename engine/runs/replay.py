@@ -41,7 +41,7 @@ from ...phrt_addon.runs import run_log
 from ...phrt_addon import schema
 from ...phrt_addon.runs import folder as run_folder
 from ...phrt_addon.runs import lock, run_files, work
-from ...phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
+from ...phrt_addon.schema import COPIED_FRAME_COLUMNS, EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from .. import extract, final
 from .camera_path import ReplayError
 from .interrupts import captured_stderr, stop_on_signals
@@ -232,7 +232,7 @@ class ReplayRun:
                 self._commit_image(frame, blender_said)
             blender_said.forward()
             row = {key: result.stats.get(key) for key in schema.FRAME_COLUMNS}
-            row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
+            row.update({key: result.stats.get(COPIED_FRAME_COLUMNS.get(key, key)) for key in EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
             self.log.add_frame(row, result.selection_rows)
             state.last_result = None

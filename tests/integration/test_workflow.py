@@ -405,6 +405,7 @@ def check_run(run_dir, frames, mode, images="exr"):
         assert row["n_selected"] == sum(bool(s["selected"]) for s in rows)
         assert row["n_candidates"] == sum(s["reason"] != "not_candidate" for s in rows)
         assert row["n_visible"] == sum(bool(s["visible"]) for s in rows)
+        assert row["lighting_ms"] == row["composite_ms"]  # docs/formats.md: the column's first name
         for s in rows:
             assert (s["reason"] == "") == bool(s["selected"])
             assert s["reason"] in ("",) + schema.REASONS
