@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene import lights
+
 NORMAL_OFFSET_TEXELS = 1.5
 DEPTH_BIAS_TEXELS = 1.0
 
@@ -130,7 +132,8 @@ def light_views(light, bounds, size) -> list[LightView]:
     low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
     extent = max(float(np.max(high - low)), 1e-6)
     corners = _corners(bounds)
-    if light.kind == "SUN":
+    kind = lights.kind(light)
+    if kind is lights.LightKind.SUN:
         origin = (low + high) / 2.0
         view = look_at(light.direction)
         local = (corners - origin) @ view[:3, :3].T
@@ -145,7 +148,7 @@ def light_views(light, bounds, size) -> list[LightView]:
     distances = np.linalg.norm(corners - origin, axis=1)
     far = max(float(distances.max()), 1e-3) * 1.01
     near = max(far * 1e-4, 1e-4 * extent, 1e-6)
-    if light.kind == "SPOT":
+    if kind is lights.LightKind.SPOT:
         fov = min(float(light.spot_size) * 1.05 + 0.02, np.radians(170.0))
         return [LightView(origin, look_at(light.direction), perspective(fov, near, far), size, False,
                           near, far, fov / size)]
