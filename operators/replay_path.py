@@ -24,7 +24,7 @@ from ..engine import candidate_list
 from ..engine.runs import replay
 from ..engine.runs import camera_path
 from ..properties import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_FLAG_ITEMS
-from ..phrt_addon.runs import run_files
+from ..phrt_addon.runs import folder as run_folder
 
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
@@ -44,7 +44,7 @@ def output_root(output_dir: str) -> Path:
 
 def check_output_root(root: Path):
     """ReplayError unless the folder ``root`` can be created and written (creates nothing)."""
-    problem = run_files.output_dir_problem(root)
+    problem = run_folder.output_dir_problem(root)
     if problem is not None:
         raise camera_path.ReplayError(problem)
 
@@ -107,9 +107,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
             start = self.frame_start
         if self.properties.is_property_set("frame_end"):
             end = self.frame_end
-        if end < start:
-            raise camera_path.ReplayError(f"frame range {start}-{end} ends before it starts: "
-                                     f"give frame_end >= frame_start")
+        camera_path.check_frame_range(start, end)
         modes = [mode for mode in replay.MODES if mode in self.modes]
         if not modes:
             raise camera_path.ReplayError("no mode chosen: pick at least one of raster, hybrid, raytrace")

@@ -43,7 +43,7 @@ from ...phrt_addon.runs import folder as run_folder
 from ...phrt_addon.runs import lock, run_files, work
 from ...phrt_addon.schema import COPIED_FRAME_COLUMNS, EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from .. import extract, final
-from .camera_path import ReplayError
+from .camera_path import ReplayError, check_frame_range
 from .interrupts import captured_stderr, stop_on_signals
 
 # Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
@@ -84,6 +84,23 @@ class ReplayResult:
     problems: list = dataclasses.field(default_factory=list)  # one line per distinct problem, with its count
 
 
+def check_input(*, mode=None, images=None, budget_ms=None, budget_at=None, frame_range=None):
+    """ReplayError unless the replay arguments given are valid: the one check of them, made by
+    ``ReplayRun`` and, before anything is loaded or written, by the ``phrt`` command (whose option
+    names the messages use: the parameters are named alike)."""
+    if mode is not None and str(mode).upper() not in MODES:
+        raise ReplayError(f"unknown mode '{mode}': use raster, hybrid or raytrace")
+    if images is not None and images not in IMAGE_FORMATS:
+        raise ReplayError(f"unknown image format '{images}': use exr, png or none")
+    if budget_ms is not None and not budget_ms >= 0:
+        raise ReplayError(f"budget {budget_ms:g} ms is not >= 0: give --budget-ms a frame time >= 0")
+    if budget_at is not None and not 0.0 <= budget_at <= 1.0:
+        raise ReplayError(f"--budget-at {budget_at:g} is outside 0..1: give the fraction of the way from raster (0) "
+                          f"to ray traced (1) frame time, e.g. --budget-at 0.33")
+    if frame_range is not None:
+        check_frame_range(*frame_range)
+
+
 class ReplayInterrupted(ReplayError):
     """The frame's render was stopped (Esc during a render): nothing of it was kept."""
 
@@ -101,19 +118,9 @@ class ReplayRun:
     def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
                  resolution=None, scene_label=None, budget_at=None, budget_search_dirs=None,
                  overrides=None, frame_list=None, overwrite=False):
+        check_input(mode=mode, images=images, budget_ms=budget_ms, budget_at=budget_at, frame_range=frame_range)
         mode = mode.upper()
-        if mode not in MODES:
-            raise ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in MODES)}")
-        if images not in IMAGE_FORMATS:
-            raise ReplayError(f"unknown image format '{images}': use exr, png or none")
-        if budget_ms is not None and not budget_ms >= 0:
-            raise ReplayError(f"budget must be a number of milliseconds >= 0, not {budget_ms}")
         start, end = frame_range
-        if end < start:
-            raise ReplayError(f"frame range {start}-{end} ends before it starts")
-        if budget_at is not None and not 0.0 <= budget_at <= 1.0:
-            raise ReplayError(f"budget-at must be a fraction within 0..1 (0 = raster, 1 = ray traced frame "
-                              f"time), not {budget_at}")
         requested_budget_ms = budget_ms
         settings = extract.read_settings(scene)
         for key, value in (overrides or {}).items():
@@ -142,12 +149,6 @@ class ReplayRun:
             self._lock = run_folder.take(self.run_dir, overwrite)
         except run_folder.FolderError as error:
             raise ReplayError(str(error)) from None
-        try:
-            self.frames_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as error:
-            self._lock.release()
-            raise ReplayError(f"cannot write to output folder '{self.run_dir}': "
-                              f"{error.strerror or error}") from None
         self._work = work.work_record(bpy.data.filepath or None, (start, end), (width, height), mode=mode,
                                       images=images, budget_ms=requested_budget_ms, budget_at=fraction,
                                       overrides=overrides)

@@ -20,7 +20,7 @@ import pytest  # noqa: E402
 import phrt  # noqa: E402
 from phrt import compat  # noqa: E402
 from phrt.engine import final, session, viewport  # noqa: E402
-from phrt.engine.runs import replay  # noqa: E402
+from phrt.engine.runs import camera_path, replay  # noqa: E402
 from phrt.phrt_addon import schema
 from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
@@ -462,6 +462,23 @@ def test_replay_in_several_modes_writes_one_run_per_mode(scene, tmp_path):
 def test_replay_operator_rejects_bad_input_and_writes_nothing(scene, tmp_path, arguments, message):
     with pytest.raises(RuntimeError, match=message):
         bpy.ops.phrt.replay_path(output_dir=str(tmp_path / "out"), **arguments)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("arguments, message", [
+    ({"mode": "pathtrace"}, "unknown mode 'pathtrace'"),
+    ({"images": "tiff"}, "unknown image format 'tiff'"),
+    ({"budget_ms": -1.0}, "budget -1 ms is not >= 0"),
+    ({"budget_ms": float("nan")}, "budget nan ms is not >= 0"),
+    ({"budget_at": 1.5}, "--budget-at 1.5 is outside 0..1"),
+    ({"frame_range": (9, 3)}, "frame range 9-3 ends before it starts"),
+])
+def test_a_replay_refuses_bad_arguments_as_the_command_does_and_writes_nothing(scene, tmp_path, arguments, message):
+    """replay.check_input is the one check of a replay's arguments: the Python entry point refuses
+    them with the messages ``phrt render`` prints."""
+    given = {"mode": "RASTER", "frame_range": (1, 2), **arguments}
+    with pytest.raises(camera_path.ReplayError, match=message):
+        replay.replay(scene, scene.camera, given.pop("frame_range"), given.pop("mode"), tmp_path / "out", **given)
     assert not (tmp_path / "out").exists()
 
 
