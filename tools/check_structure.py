@@ -10,7 +10,9 @@
 - ``phrt_addon/`` imports no ``bpy`` (nor ``gpu``/``mathutils``), also not through
   ``importlib.import_module("bpy")`` / ``__import__``;
 - no module of the add-on assigns a mutable object (dict, list, set, call of a class...)
-  to a module-level name outside ``engine/session.py``, except declared constants.
+  to a module-level name outside ``engine/session.py``, except declared constants;
+- no file of the project (tests and tools included) uses another module's underscore name:
+  ``from .x import _name`` or ``x._name`` where ``x`` is a project module it imported.
 
 Plain ``ast``: nothing is imported or run.
 """
@@ -228,6 +230,50 @@ def module_state(root: Path = ROOT):
     return found
 
 
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def private_names(root: Path = ROOT):
+    """(file, line, what) of every use of another project module's underscore name, in every
+    Python file under ``root`` (tests and tools too): ``from .x import _name``, ``x._name`` or
+    ``phrt.x._name`` where the module was imported (a class's own ``_attributes`` through an
+    instance or ``self`` are not module names and are not looked at)."""
+    found = []
+    skip = SKIP_DIRS - {"tests", "tools"}
+    for path in sorted(root.rglob("*.py")):
+        relative = path.relative_to(root)
+        if relative.parts[0] in skip or any(part.startswith(".") for part in relative.parts):
+            continue
+        tree = ast.parse(path.read_text(), str(path))
+        bound = set()  # names (and dotted prefixes) bound to project modules or their names
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").split(".")[0] == PACKAGE):
+                for alias in node.names:
+                    if _is_private(alias.name):
+                        found.append((str(relative), node.lineno, f"from {'.' * node.level}{node.module or ''} "
+                                                                  f"import {alias.name}"))
+                    bound.add(alias.asname or alias.name)
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.split(".")[0] == PACKAGE:
+                        bound.add(alias.asname or alias.name)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and _is_private(node.attr):
+                owner = _dotted(node.value)
+                if owner in bound:
+                    found.append((str(relative), node.lineno, f"{owner}.{node.attr}"))
+    return sorted(found)
+
+
+def _dotted(node) -> str | None:
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    return ".".join([node.id] + list(reversed(parts))) if isinstance(node, ast.Name) else None
+
+
 def main() -> int:
     graph = import_graph()
     problems = 0
@@ -247,6 +293,9 @@ def main() -> int:
     for path, name, line in module_state():
         problems += 1
         print(f"module-level state outside the session: {path}:{line} {name}")
+    for path, line, what in private_names():
+        problems += 1
+        print(f"another module's underscore name: {path}:{line} {what}")
     print("no problems" if not problems else f"{problems} problems")
     return 1 if problems else 0
 

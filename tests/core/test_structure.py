@@ -38,6 +38,22 @@ def test_the_whole_project_is_checked_and_has_no_problems():
             "phrt.sample_scenes"} <= tops
     assert check.oversized() == []
     assert check.package_cycles(check.import_graph()) == []
+    assert check.private_names() == []
+
+
+def test_the_private_name_rule_finds_another_modules_underscore_names_in_tests_and_tools_too(tmp_path):
+    for folder in ("engine", "tools"):
+        (tmp_path / folder).mkdir()
+    (tmp_path / "engine" / "own.py").write_text(
+        "import numpy as np\n\nclass Thing:\n    def go(self):\n        return self._state, np._NoValue\n")
+    (tmp_path / "engine" / "user.py").write_text(
+        "from . import own\nfrom .own import _helper\n\ndef run():\n    return own._helper(), own.Thing().go()\n")
+    (tmp_path / "tools" / "script.py").write_text(
+        "import phrt.engine.own\nfrom phrt.engine import own as o\n\n"
+        "phrt.engine.own._cache, o._cache, o.__name__\n")
+    assert check.private_names(tmp_path) == [
+        ("engine/user.py", 2, "from .own import _helper"), ("engine/user.py", 5, "own._helper"),
+        ("tools/script.py", 4, "o._cache"), ("tools/script.py", 4, "phrt.engine.own._cache")]
 
 
 def test_the_size_rule_finds_a_long_module_in_any_package(tmp_path):
