@@ -12,13 +12,17 @@
 - no module of the add-on assigns a mutable object (dict, list, set, call of a class...)
   to a module-level name outside ``engine/session.py``, except declared constants;
 - no file of the project (tests and tools included) uses another module's underscore name:
-  ``from .x import _name`` or ``x._name`` where ``x`` is a project module it imported.
+  ``from .x import _name`` or ``x._name`` where ``x`` is a project module it imported;
+- every file ``docs/DESIGN.md`` names exists: each ``path/like.py`` (or ``.md``) from the
+  repository's root, each bare ``name.py`` of its map in that row's folder, any other bare
+  ``name.py`` somewhere in the project.
 
 Plain ``ast``: nothing is imported or run.
 """
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from pathlib import Path
 
@@ -274,6 +278,31 @@ def _dotted(node) -> str | None:
     return ".".join([node.id] + list(reversed(parts))) if isinstance(node, ast.Name) else None
 
 
+_PATH = re.compile(r"(?<![\w./])([A-Za-z_][\w.-]*(?:/[\w.-]+)+\.(?:py|md))(?![\w/])")
+_BARE = re.compile(r"`([A-Za-z_][\w-]*\.py)`")
+_FOLDER = re.compile(r"`([A-Za-z_][\w/-]*/)`")
+
+
+def missing_design_paths(root: Path = ROOT, design: Path | None = None) -> list:
+    """(line, name) of every file ``docs/DESIGN.md`` (or ``design``) names that does not exist."""
+    design = root / "docs" / "DESIGN.md" if design is None else design
+    everywhere = {path.name for path in root.rglob("*.py") if ".venv" not in path.parts}
+    missing = []
+    for number, line in enumerate(design.read_text(encoding="utf-8").splitlines(), start=1):
+        missing += [(number, path) for path in _PATH.findall(line) if not (root / path).is_file()]
+        bare = [name for name in _BARE.findall(line)]
+        cells = line.split("|")
+        if line.startswith("|") and len(cells) > 2:  # a row of the map: | folders | what lives there |
+            folders = [root / folder for folder in _FOLDER.findall(cells[1])]
+            if any(name in _BARE.findall(cells[1]) for name in bare):
+                folders.append(root)  # a row of root modules (`properties.py`, ...)
+            missing += [(number, name) for name in bare
+                        if folders and not any((folder / name).is_file() for folder in folders)]
+        else:
+            missing += [(number, name) for name in bare if name not in everywhere]
+    return missing
+
+
 def main() -> int:
     graph = import_graph()
     problems = 0
@@ -296,6 +325,9 @@ def main() -> int:
     for path, line, what in private_names():
         problems += 1
         print(f"another module's underscore name: {path}:{line} {what}")
+    for line, name in missing_design_paths():
+        problems += 1
+        print(f"docs/DESIGN.md:{line} names a file that does not exist: {name}")
     print("no problems" if not problems else f"{problems} problems")
     return 1 if problems else 0
 

@@ -83,3 +83,24 @@ def test_the_core_rule_finds_bpy_imported_through_importlib(tmp_path):
     (tmp_path / "phrt_addon" / "plain.py").write_text("import gpu\n")
     assert sorted(check.blender_imports_in_core(tmp_path)) == [("phrt_addon/plain.py", "gpu"),
                                                              ("phrt_addon/sneaky.py", "bpy")]
+
+
+def test_every_file_docs_design_names_exists():
+    assert check.missing_design_paths() == []
+
+
+def test_the_design_path_rule_finds_a_file_that_is_gone(tmp_path):
+    for folder in ("engine/gpu", "docs"):
+        (tmp_path / folder).mkdir(parents=True)
+    for name in ("engine/gpu/frame.py", "engine/extract.py", "props.py"):
+        (tmp_path / name).write_text("")
+    design = tmp_path / "docs" / "DESIGN.md"
+    design.write_text(
+        "| folder | what |\n|---|---|\n"
+        "| `engine/gpu/` | the frame (`frame.py`), the lighting (`lighting.py`) |\n"
+        "| `props.py`, `engine/` | properties (`props.py`), extraction (`extract.py`), gone (`gone.py`) |\n"
+        "\n    depsgraph --engine/extract.py--> snapshot (engine/snapshot.py), docs/formats.md\n"
+        "A bare name in prose (`frame.py`) exists somewhere, this one (`nowhere.py`) nowhere;\n"
+        "URL-like words are no paths: https://example.org/a.html, engine/gpu/frame.pyc.\n")
+    assert check.missing_design_paths(tmp_path, design) == [
+        (3, "lighting.py"), (4, "gone.py"), (6, "engine/snapshot.py"), (6, "docs/formats.md"), (7, "nowhere.py")]
