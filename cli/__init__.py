@@ -20,19 +20,14 @@ checked before anything is written.
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 import time
 from pathlib import Path
 
-# Starting Blender and opening scenes (cli/blender_process.py), under the names cli/demo.py, cli/bench.py and
-# tools/soak.py use.
+from . import blender_process
+from .arguments import budget_fractions, check_output_dir, check_replay_input, count, number, parse_resolution
 from .blender_process import SAMPLE_DIR, UserError, load_scene
-from .blender_process import blender as _blender
-from .blender_process import import_blender as _import_blender
-from .blender_process import quiet_exit as _quiet_exit
-from .blender_process import quiet_stdout as _quiet_stdout
 from . import advise as advise_command
 from .rescore import command_rescore
 
@@ -53,8 +48,8 @@ def build_parser():
     render.add_argument("--path", help="camera path (camera object) to replay (default: the scene's first)")
     render.add_argument("--frames", help="frame range A-B (default: the whole path)")
     render.add_argument("--mode", default="hybrid", type=str.lower, help="raster, hybrid or raytrace")
-    render.add_argument("--budget-ms", type=_number, help="frame time budget in ms (default: the scene's)")
-    render.add_argument("--budget-at", type=_number, metavar="F",
+    render.add_argument("--budget-ms", type=number, help="frame time budget in ms (default: the scene's)")
+    render.add_argument("--budget-at", type=number, metavar="F",
                         help="frame time budget F of the way from raster (0) to ray traced (1) frame time on "
                              "this machine, from runs of the path beside --out or a short calibration")
     render.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
@@ -75,19 +70,19 @@ def build_parser():
     sweep.add_argument("scene", help="a .blend file or a sample scene name (arcade, atrium)")
     sweep.add_argument("--path", help="camera path (camera object) to replay (default: the scene's first)")
     sweep.add_argument("--frames", help="frame range A-B (default: the whole path)")
-    sweep.add_argument("--budgets", type=_count, default=None,
+    sweep.add_argument("--budgets", type=count, default=None,
                        help="hybrid budgets spread evenly between raster and ray traced frame time (default 5)")
     sweep.add_argument("--budget-at", metavar="F[,F...]",
                        help="the hybrid budgets as fractions of the way from raster (0) to ray traced (1) frame "
                             "time, instead of --budgets")
     sweep.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
     sweep.add_argument("--out", help="sweep folder (default: out/<scene>-<path>-sweep/)")
-    sweep.add_argument("--oracle-every", type=_count, default=None, metavar="K",
+    sweep.add_argument("--oracle-every", type=count, default=None, metavar="K",
                        help="the oracle judges every K-th frame (default 8)")
     sweep.add_argument("--variants", metavar="NAME[,NAME...]",
                        help="selection variants of the hybrid runs (default all: measured, papercost, i0, i0.1, "
                             "rperms, error)")
-    sweep.add_argument("--workers", type=_count, default=None, metavar="N",
+    sweep.add_argument("--workers", type=count, default=None, metavar="N",
                        help="run the plan on a Dask LocalCluster of N worker processes on this machine "
                             "(default: one run after the other in this process)")
     sweep.add_argument("--scheduler", metavar="ADDRESS",
@@ -102,54 +97,6 @@ def build_parser():
         sweep.add_argument(flag, metavar="FILE", help=f"{what} (PEM) for a tls:// --scheduler (docs/cluster.md)")
     advise_command.add_parser(commands)
     return parser
-
-
-def _count(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not a count >= 1")
-    return value
-
-
-def _number(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
-    return value
-
-
-def check_budget_at(fraction):
-    """UserError unless ``fraction`` is None or within 0..1."""
-    if fraction is not None and not 0.0 <= fraction <= 1.0:
-        raise UserError(f"--budget-at {fraction:g} is outside 0..1: give the fraction of the way from raster (0) "
-                        f"to ray traced (1) frame time, e.g. --budget-at 0.33")
-
-
-def parse_resolution(text):
-    if text is None:
-        return None
-    parts = text.lower().split("x")
-    try:
-        width, height = (int(p) for p in parts)
-    except ValueError:
-        raise UserError(f"malformed resolution '{text}': use WxH, e.g. --resolution 640x480") from None
-    if width <= 0 or height <= 0 or width > 16384 or height > 16384:
-        raise UserError(f"resolution '{text}' is out of range: width and height must be 1-16384 pixels")
-    return width, height
-
-
-def _check_output_dir(path):
-    """Raise UserError unless ``path`` can be created and written (creates nothing)."""
-    from ..phrt_addon.runs.run_files import output_dir_problem
-    problem = output_dir_problem(path)
-    if problem is not None:
-        raise UserError(problem)
 
 
 def _progress(stream):
@@ -169,12 +116,12 @@ def _progress(stream):
 
 
 def command_scenes(args):
-    _check_output_dir(args.out)
-    _blender()
+    check_output_dir(args.out)
+    blender_process.blender()
     from ..sample_scenes import generate
     for name in generate.SCENES:
         start = time.perf_counter()
-        with _quiet_stdout():
+        with blender_process.quiet_stdout():
             path = generate.write_scene(name, args.out)
         print(f"{name}: {path} ({time.perf_counter() - start:.1f} s)")
     return 0
@@ -191,7 +138,7 @@ def _open_path(args):
         except camera_path.ReplayError as error:
             raise UserError(str(error)) from None
     if args.out is not None:
-        _check_output_dir(args.out)
+        check_output_dir(args.out)
     label = load_scene(args.scene)
     import bpy
     scene = bpy.context.scene
@@ -204,25 +151,19 @@ def _open_path(args):
 
 
 def command_render(args):
-    from ..engine.runs import replay as replay_module  # noqa: F401  (imports bpy)
+    from ..engine.runs import replay as replay_module
     from ..engine.runs import camera_path
-    if args.mode not in ("raster", "hybrid", "raytrace"):
-        raise UserError(f"unknown mode '{args.mode}': use raster, hybrid or raytrace")
-    if args.images not in ("exr", "png", "none"):
-        raise UserError(f"unknown image format '{args.images}': use exr, png or none")
-    if args.budget_ms is not None and args.budget_ms < 0:
-        raise UserError(f"negative budget {args.budget_ms:g} ms: give --budget-ms a value >= 0")
-    check_budget_at(args.budget_at)
+    check_replay_input(mode=args.mode, images=args.images, budget_ms=args.budget_ms, budget_at=args.budget_at)
     if args.budget_ms is not None and args.budget_at is not None:
         raise UserError("--budget-ms and --budget-at both given: give the budget one way")
     resolution = parse_resolution(args.resolution)
     label, scene, camera, frame_range = _open_path(args)
     out = Path(args.out) if args.out else replay_module.default_run_dir("out", label, camera.name, args.mode)
-    _check_output_dir(out)
+    check_output_dir(out)
     progress = _progress(sys.stderr)
     started = time.perf_counter()
     try:
-        with _quiet_stdout():
+        with blender_process.quiet_stdout():
             result = replay_module.replay(scene, camera, frame_range, args.mode, out, images=args.images,
                                           budget_ms=args.budget_ms, resolution=resolution, scene_label=label,
                                           on_progress=progress, budget_at=args.budget_at,
@@ -254,7 +195,7 @@ def command_report(args):
             raise UserError(f"no run directory '{run}': give folders written by 'phrt render'")
         if not (Path(run) / "frames.csv").exists():
             raise UserError(f"'{run}' is not a run directory (no frames.csv): give folders written by 'phrt render'")
-    _check_output_dir(args.out)
+    check_output_dir(args.out)
     try:
         files = report.build_report(args.runs, reference=args.reference, out_dir=args.out)
     except (ValueError, FileNotFoundError) as error:
@@ -265,22 +206,14 @@ def command_report(args):
     return 0
 
 
-def _budget_fractions(args):
+def _sweep_fractions(args):
     """The sweep's budget fractions from --budget-at or --budgets (UserError if both or malformed)."""
     from ..phrt_addon.runs import plan as plan_module
     if args.budget_at is not None and args.budgets is not None:
         raise UserError("--budgets and --budget-at both given: give the hybrid budgets one way")
     if args.budget_at is None:
         return plan_module.budget_fractions(args.budgets or plan_module.DEFAULT_BUDGETS)
-    fractions = []
-    for part in str(args.budget_at).split(","):
-        try:
-            value = _number(part.strip())
-        except argparse.ArgumentTypeError as error:
-            raise UserError(f"--budget-at: {error}; give fractions like 0.25,0.5") from None
-        check_budget_at(value)
-        fractions.append(value)
-    return sorted(set(fractions))
+    return budget_fractions(args.budget_at)
 
 
 def command_sweep(args):
@@ -288,7 +221,7 @@ def command_sweep(args):
     from ..phrt_addon.runs import plan as plan_module
     from . import cluster
     cluster_options = cluster.executor_options(args)
-    fractions = _budget_fractions(args)
+    fractions = _sweep_fractions(args)
     variants = tuple(plan_module.VARIANTS)
     if args.variants is not None:
         variants = tuple(dict.fromkeys(name.strip() for name in args.variants.split(",") if name.strip()))
@@ -301,7 +234,7 @@ def command_sweep(args):
     from ..engine import extract
     resolution = resolution or extract.resolution(scene)
     folder = Path(args.out) if args.out else Path("out") / f"{label}-{camera.name}-sweep"
-    _check_output_dir(folder)
+    check_output_dir(folder)
     scene_ref = args.scene if Path(args.scene).suffix.lower() != ".blend" else str(Path(args.scene).resolve())
     from ..phrt_addon.raster import gbuffer
     problem = gbuffer.resolution_problem(*resolution)
@@ -373,17 +306,17 @@ def main(argv=None):
     try:
         args = build_parser().parse_args(argv)
         if args.command not in ("report", "rescore"):  # every other command runs Blender
-            _import_blender()
+            blender_process.import_blender()
         command = {"scenes": command_scenes, "render": command_render, "report": command_report,
                    "rescore": command_rescore, "sweep": command_sweep,
-                   "advise": lambda parsed: advise_command.command_advise(parsed, parse_resolution)}[args.command]
+                   "advise": advise_command.command_advise}[args.command]
         return command(args)
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)
         return 2
     finally:
         if as_program and "bpy" in sys.modules:
-            _quiet_exit()
+            blender_process.quiet_exit()
 
 
 if __name__ == "__main__":

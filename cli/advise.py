@@ -4,11 +4,11 @@ what each tag is worth per millisecond along a camera path, and one recommendati
 everything is checked before anything is written."""
 from __future__ import annotations
 
-import math
 import sys
 import time
 from pathlib import Path
 
+from .arguments import budget_fractions, check_output_dir, parse_resolution
 from .blender_process import UserError, load_scene, quiet_stdout
 
 
@@ -40,51 +40,31 @@ def _whole(text, name, default):
     return value
 
 
-def budget_fractions(text) -> tuple:
-    """'0.25,0.5' -> (0.25, 0.5) (UserError when malformed or outside 0..1)."""
-    fractions = []
-    for part in str(text).split(","):
-        try:
-            value = float(part.strip())
-        except ValueError:
-            raise UserError(f"--budget-at: '{part.strip()}' is not a number; give fractions like 0.25,0.5") from None
-        if not math.isfinite(value) or not 0.0 <= value <= 1.0:
-            raise UserError(f"--budget-at {part.strip()} is outside 0..1: give fractions of the way from raster (0) "
-                            f"to ray traced (1) frame time, e.g. --budget-at 0.25,0.5")
-        fractions.append(value)
-    return tuple(sorted(set(fractions)))
-
-
-def command_advise(args, parse_resolution):
+def command_advise(args):
     from ..engine.runs import advise
-    from ..engine.runs import camera_path as replay_module
+    from ..engine.runs import camera_path
     from ..phrt_addon.advise import items
-    from ..phrt_addon.runs.run_files import output_dir_problem
-    fractions = budget_fractions(args.budget_at)
+    fractions = tuple(budget_fractions(args.budget_at))
     every = _whole(args.every, "--every", advise.DEFAULT_EVERY)
     cap = _whole(args.untagged, "--untagged", items.DEFAULT_PROSPECTS)
     resolution = parse_resolution(args.resolution)
     if args.frames is not None:
         try:
-            replay_module.parse_frames(args.frames, (1, 1))
-        except replay_module.ReplayError as error:
+            camera_path.parse_frames(args.frames, (1, 1))
+        except camera_path.ReplayError as error:
             raise UserError(str(error)) from None
-    for folder in ([args.out] if args.out else []):
-        problem = output_dir_problem(folder)
-        if problem is not None:
-            raise UserError(problem)
+    if args.out:
+        check_output_dir(args.out)
     label = load_scene(args.scene)
     import bpy
     scene = bpy.context.scene
     try:
-        camera = replay_module.find_path(scene, args.path)
-        frame_range = replay_module.parse_frames(args.frames, replay_module.path_frame_range(scene, camera))
-    except replay_module.ReplayError as error:
+        camera = camera_path.find_path(scene, args.path)
+        frame_range = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
+    except camera_path.ReplayError as error:
         raise UserError(str(error)) from None
     out = Path(args.out) if args.out else Path("out") / f"{label}-{camera.name}-advice"
-    problem = output_dir_problem(out)
-    if problem is not None:
-        raise UserError(problem)
+    check_output_dir(out)
     started = time.perf_counter()
     stream = sys.stderr
 
@@ -98,7 +78,7 @@ def command_advise(args, parse_resolution):
             written = advise.run_advice(scene, camera, frame_range, out, budget_at=fractions, every=every,
                                         prospects_cap=cap, resolution=resolution, scene_label=label,
                                         on_progress=show)
-    except (replay_module.ReplayError, ValueError) as error:
+    except (camera_path.ReplayError, ValueError) as error:
         raise UserError(str(error).splitlines()[0]) from None
     if stream.isatty():
         stream.write("\n")

@@ -23,14 +23,13 @@ from pathlib import Path
 
 
 def replay_bench(scene_name, frames, out=print):
-    from .. import cli
     from . import blender_process
     from ..engine.runs import replay
     from ..engine.runs import camera_path
     from ..phrt_addon.runs import run_files
     blender_process.blender()
     import bpy
-    label = cli.load_scene(scene_name)
+    label = blender_process.load_scene(scene_name)
     scene = bpy.context.scene
     camera = camera_path.find_path(scene, None)
     frame_range = camera_path.parse_frames(frames, camera_path.path_frame_range(scene, camera))
@@ -75,7 +74,7 @@ def _paper_ratio_range(index):
     return min(ratios), max(ratios)
 
 
-def _frame_rows(run_dir):
+def steady_rows(run_dir):
     """The frames of a run with their one-time work taken out (``total_ms - setup_ms``: shader
     compiles, uploads, new shadow maps, Embree builds), as the budget loop sees them; the first
     frame (cold caches) is left out."""
@@ -88,12 +87,14 @@ def _frame_rows(run_dir):
     return rows
 
 
-def _mean(rows, key):
+def column_mean(rows, key):
+    """The mean of column ``key`` over ``rows`` (empty cells left out; NaN when none)."""
     values = [float(row[key]) for row in rows if row.get(key) not in (None, "")]
     return sum(values) / len(values) if values else float("nan")
 
 
-def _p95(rows, key):
+def column_p95(rows, key):
+    """The 95th percentile of column ``key`` over ``rows`` (nearest rank)."""
     values = sorted(float(row[key]) for row in rows)
     return values[min(len(values) - 1, int(round(0.95 * (len(values) - 1))))]
 
@@ -121,7 +122,6 @@ def workbench_ms(scene, frames):
 
 def gpu_frame_bench(frames="200-259", scenes=("arcade", "atrium"), out=print):
     """Issue 9's figures, all measured in this one run."""
-    from .. import cli
     from . import blender_process
     from ..engine.runs import replay
     from ..engine.runs import camera_path
@@ -130,7 +130,7 @@ def gpu_frame_bench(frames="200-259", scenes=("arcade", "atrium"), out=print):
     table = []
     with tempfile.TemporaryDirectory(prefix="phrt-bench-gpu-") as temp:
         for scene_name in scenes:
-            label = cli.load_scene(scene_name)
+            label = blender_process.load_scene(scene_name)
             scene = bpy.context.scene
             scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 640, 480, 100
             camera = camera_path.find_path(scene, None)
@@ -140,30 +140,30 @@ def gpu_frame_bench(frames="200-259", scenes=("arcade", "atrium"), out=print):
                 with blender_process.quiet_stdout():
                     result = replay.replay(scene, camera, frame_range, mode, Path(temp) / f"{label}-{mode}",
                                            images="none", scene_label=label)
-                runs[mode] = _frame_rows(result.run_dir)
-            raster_ms, raytrace_ms = _mean(runs["RASTER"], "total_ms"), _mean(runs["RAYTRACE"], "total_ms")
+                runs[mode] = steady_rows(result.run_dir)
+            raster_ms, raytrace_ms = column_mean(runs["RASTER"], "total_ms"), column_mean(runs["RAYTRACE"], "total_ms")
             budget = raster_ms + (raytrace_ms - raster_ms) / 3.0
             with blender_process.quiet_stdout():
                 result = replay.replay(scene, camera, frame_range, "HYBRID", Path(temp) / f"{label}-HYBRID",
                                        images="none", scene_label=label, budget_ms=budget)
-            runs["HYBRID"] = _frame_rows(result.run_dir)
-            hybrid_ms, hybrid_p95 = _mean(runs["HYBRID"], "total_ms"), _p95(runs["HYBRID"], "total_ms")
+            runs["HYBRID"] = steady_rows(result.run_dir)
+            hybrid_ms, hybrid_p95 = column_mean(runs["HYBRID"], "total_ms"), column_p95(runs["HYBRID"], "total_ms")
             out(f"\nGPU frame: {label}/{camera.name} frames {frames} at 640x480 (means over frames 2+, "
                 f"one-time work taken out)")
-            gbuffer, lighting = _mean(runs["RASTER"], "gbuffer_ms"), _mean(runs["RASTER"], "lighting_ms")
-            out(f"  raster: {raster_ms:.1f} ms/frame (wall {_mean(runs['RASTER'], 'wall_ms'):.1f}); "
+            gbuffer, lighting = column_mean(runs["RASTER"], "gbuffer_ms"), column_mean(runs["RASTER"], "composite_ms")
+            out(f"  raster: {raster_ms:.1f} ms/frame (wall {column_mean(runs['RASTER'], 'wall_ms'):.1f}); "
                 f"G-buffer pass {gbuffer:.1f} ms, lighting + composite {lighting:.1f} ms: "
                 f"lighting/G-buffer {lighting / gbuffer:.2f} (target <= 1)")
             if scene_name == "arcade":
                 workbench = workbench_ms(scene, frame_range)
-                phrt_wall = _mean(runs["RASTER"], "wall_ms")
+                phrt_wall = column_mean(runs["RASTER"], "wall_ms")
                 wb = sum(workbench) / len(workbench)
                 out(f"  Workbench (no AA, shadows, specular): {wb:.1f} ms/frame; "
                     f"PHRT raster / Workbench {phrt_wall / wb:.3f} (target <= 0.25)")
             out(f"  hybrid at 1/3 of the way raster -> raytrace: budget {budget:.1f} ms, mean {hybrid_ms:.1f} "
                 f"({hybrid_ms / budget:.2f}x, target <= 1), p95 {hybrid_p95:.1f} ({hybrid_p95 / budget:.2f}x, "
-                f"target <= 1.10), traced {_mean(runs['HYBRID'], 'n_selected'):.1f} of "
-                f"{_mean(runs['HYBRID'], 'n_visible'):.1f} visible candidates; "
+                f"target <= 1.10), traced {column_mean(runs['HYBRID'], 'n_selected'):.1f} of "
+                f"{column_mean(runs['HYBRID'], 'n_visible'):.1f} visible candidates; "
                 f"{sum(row['setup_frame'] for row in runs['HYBRID'])} frames with one-time work (taken out)")
             table.append((f"{label}/{camera.name}", raster_ms, hybrid_ms, raytrace_ms))
     low_h, high_h = _paper_ratio_range(1)

@@ -36,7 +36,7 @@ SHOWCASE_BUDGET_AT = 0.4
 
 def _render_showcase(bpy, out: Path):
     from .. import compat
-    from ..engine import final
+    from ..engine import session
     from ..sample_scenes import showcase
     scene = showcase.build_showcase(640, 480)
     scene.phrt.mode = "HYBRID"
@@ -54,7 +54,7 @@ def _render_showcase(bpy, out: Path):
         render.use_file_extension = True
         render.filepath = str(out / "showcase")
         bpy.ops.render.render(write_still=True)
-        timings.append(dict(final.last_frame().stats))
+        timings.append(dict(session.last_frame().stats))
     stats = timings[-1]  # the warm frame
     return (f"showcase frame (640x480, hybrid, budget at {SHOWCASE_BUDGET_AT:g} = {stats['budget_ms']:.0f} ms, warm): "
             f"total {stats['total_ms']:.0f} ms = raster {stats['raster_ms']:.0f}"

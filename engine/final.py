@@ -5,7 +5,7 @@ depsgraph -> snapshot (``extract``) -> GPU G-buffer and shadow maps (``gpu.frame
 and, when a replay session is active, the run logs.
 
 State that must survive between frames lives outside the engine instance, in the
-engine's session (``engine/session.py``) and, during a replay, in a ``ReplaySession``
+engine's session (``engine/session.py``) and, during a replay, in a ``ReplayState``
 (one per replay: frame renderer with its Embree scenes, cost model and last
 selection), so a replay made of separate ``render.render()`` calls and an animation
 render behave the same.
@@ -23,7 +23,6 @@ from ..phrt_addon.problems import ProblemLog
 from ..phrt_addon.schema import PASS_FIELDS
 from . import extract, session
 from .gpu.frame import GPUFrame
-from .session import last_frame  # noqa: F401 (the UI's accessor, re-exported for scripts and tests)
 
 
 def log_exception(error):
@@ -35,8 +34,9 @@ def release_caches():
     session.release()
 
 
-class ReplaySession:
-    """What a replay carries from frame to frame. Activate with ``with session:``."""
+class ReplayState:
+    """What a replay (or the oracle's renders) carries from frame to frame: the frame renderer,
+    the settings and camera it renders with, the last result.  Activate with ``with state:``."""
 
     def __init__(self, on_frame=None, settings_override=None, camera=None):
         self.renderer = FrameRenderer()
@@ -66,7 +66,7 @@ class ReplaySession:
 
 
 def active_replay():
-    """The ``ReplaySession`` of the replay being rendered, or None."""
+    """The ``ReplayState`` of the replay being rendered, or None."""
     return session.current().replay
 
 

@@ -9,7 +9,7 @@ and every engine instance holds it as ``self.session``:
 - ``meshes``, ``textures``: what ``extract`` converted, by content (bounded caches);
 - ``renderers``: a ``FrameRenderer`` per scene for F12 renders outside a replay (Embree
   scenes, cost model, last selection);
-- ``replay``: the active ``final.ReplaySession`` (None outside a replay);
+- ``replay``: the active ``final.ReplayState`` (None outside a replay);
 - ``last_frame``: the last frame's decisions, statistics and problems, which the N panel,
   the viewport overlay and ``phrt.export_selection_log`` read through ``last_frame()``;
 - ``blas``: numpy's OpenBLAS, held to one thread while PHRT renders (``blas_threads``);

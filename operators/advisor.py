@@ -15,7 +15,7 @@ import bpy
 from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
 from ..engine.runs import advise, item_measure
-from ..engine.runs import camera_path as replay
+from ..engine.runs import camera_path
 from ..phrt_addon.advise import items as advice_items
 from ..phrt_addon.advise import recommend
 from . import replay_path
@@ -93,13 +93,12 @@ class PHRT_OT_advise_path(bpy.types.Operator):
     def _steps(self, context):
         scene = context.scene
         camera = scene.camera
-        start, end = replay.path_frame_range(scene, camera)
+        start, end = camera_path.path_frame_range(scene, camera)
         if self.frame_start > 0:
             start = self.frame_start
         if self.frame_end > 0:
             end = self.frame_end
-        if end < start:
-            raise ValueError(f"frame range {start}-{end} ends before it starts")
+        camera_path.check_frame_range(start, end)
         budgets = parse_budgets(self.budget_at)
         root = replay_path.output_root(self.output_dir)
         replay_path.check_output_root(root)
@@ -120,7 +119,7 @@ class PHRT_OT_advise_path(bpy.types.Operator):
             for step in steps:
                 if step[0] == "done":
                     self._done(context, step[1])
-        except (ValueError, replay.ReplayError) as error:
+        except (ValueError, camera_path.ReplayError) as error:
             self.report({"ERROR"}, f"PHRT: {error}")
             return {"CANCELLED"}
         return {"FINISHED"}
@@ -129,7 +128,7 @@ class PHRT_OT_advise_path(bpy.types.Operator):
         self._stop_asked = False
         try:
             self._generator = self._steps(context)
-        except (ValueError, replay.ReplayError) as error:
+        except (ValueError, camera_path.ReplayError) as error:
             self.report({"ERROR"}, f"PHRT: {error}")
             return {"CANCELLED"}
         window_manager = context.window_manager
@@ -148,7 +147,7 @@ class PHRT_OT_advise_path(bpy.types.Operator):
         except advise.AdviceCancelled:
             self._cleanup(context, "PHRT: advice cancelled; the scene is as it was")
             return {"CANCELLED"}
-        except (ValueError, replay.ReplayError, RuntimeError) as error:
+        except (ValueError, camera_path.ReplayError, RuntimeError) as error:
             self._cleanup(context, f"PHRT: advice failed: {error}")
             return {"CANCELLED"}
         if step[0] == "done":

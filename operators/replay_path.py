@@ -10,7 +10,7 @@ Two ways to run, same files:
 - From a script or ``blender -b`` (``bpy.ops.phrt.replay_path(...)``, i.e. execute):
   ``engine.runs.replay.replay()`` runs every frame of every mode to the end.
 
-The modal path drives ``engine.runs.replay.SteppedReplay`` (of which ``replay()`` is the
+The modal path drives ``engine.runs.replay.ReplayRun`` (of which ``replay()`` is the
 blocking loop), so both write exactly the same files.
 docs/batch.md has the ``blender -b`` command lines.
 """
@@ -24,8 +24,7 @@ from ..engine import candidate_list
 from ..engine.runs import replay
 from ..engine.runs import camera_path
 from ..properties import BLEND_RELATIVE_PATH, IMAGE_ITEMS, MODE_FLAG_ITEMS
-from ..phrt_addon.runs import run_files
-from ..engine.runs.replay import ReplayInterrupted, SteppedReplay  # noqa: F401 (used by the modal path and tests)
+from ..phrt_addon.runs import folder as run_folder
 
 # Events a running replay lets through, so the designer can still look around.
 _NAVIGATION_EVENTS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
@@ -45,7 +44,7 @@ def output_root(output_dir: str) -> Path:
 
 def check_output_root(root: Path):
     """ReplayError unless the folder ``root`` can be created and written (creates nothing)."""
-    problem = run_files.output_dir_problem(root)
+    problem = run_folder.output_dir_problem(root)
     if problem is not None:
         raise camera_path.ReplayError(problem)
 
@@ -108,9 +107,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
             start = self.frame_start
         if self.properties.is_property_set("frame_end"):
             end = self.frame_end
-        if end < start:
-            raise camera_path.ReplayError(f"frame range {start}-{end} ends before it starts: "
-                                     f"give frame_end >= frame_start")
+        camera_path.check_frame_range(start, end)
         modes = [mode for mode in replay.MODES if mode in self.modes]
         if not modes:
             raise camera_path.ReplayError("no mode chosen: pick at least one of raster, hybrid, raytrace")
@@ -192,7 +189,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
         try:
             if self._run is None:
                 mode = self._modes[self._mode_index]
-                self._run = SteppedReplay(context.scene, self._camera, self._frame_range, mode,
+                self._run = replay.ReplayRun(context.scene, self._camera, self._frame_range, mode,
                                           self._run_dir(context, self._camera, mode, self._root),
                                           images=self.images.lower(), scene_label=scene_label(context.scene),
                                           overwrite=self.overwrite)
@@ -206,7 +203,7 @@ class PHRT_OT_replay_path(bpy.types.Operator):
                 self._mode_index += 1
                 if self._mode_index == len(self._modes):
                     return self._stop(context, cancelled=False)
-        except ReplayInterrupted:  # Esc while a frame was rendering
+        except replay.ReplayInterrupted:  # Esc while a frame was rendering
             return self._stop(context, cancelled=True)
         except (camera_path.ReplayError, RuntimeError) as error:
             self._run = None  # step() already closed its logs and restored the scene

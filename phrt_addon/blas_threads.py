@@ -25,7 +25,7 @@ import sys
 _PREFIXES = ("openblas", "scipy_openblas")
 _SUFFIXES = ("", "64_")
 
-def _loaded_libraries() -> list[str]:
+def loaded_libraries() -> list[str]:
     """Paths of the shared libraries loaded in this process whose name mentions BLAS."""
     paths: set[str] = set()
     if sys.platform.startswith("linux"):
@@ -98,7 +98,7 @@ class BlasThreads:
 def _find_controls() -> list:
     import numpy  # noqa: F401  (loads the BLAS numpy links)
     controls = []
-    for path in _loaded_libraries():
+    for path in loaded_libraries():
         try:
             library = ctypes.CDLL(path)
         except OSError:

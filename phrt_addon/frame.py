@@ -210,7 +210,6 @@ class FrameRenderer:
             "refraction_rays": counters.refraction_rays, "upload_ms": counters.upload_ms,
             "setup_ms": setup_ms, "readback_ms": readback_ms,
             "gbuffer_ms": float(raster.stats.get("gbuffer_ms", raster.raster_ms)),
-            "lighting_ms": composite_ms,
             "time_left_ms": float(selection.time_left_ms), "triangles": snapshot.n_triangles,
         }
         return FrameResult(passes=passes, stats=stats, selection=selection,

@@ -75,6 +75,9 @@ FRAME_COLUMNS = (
 # Written after FRAME_COLUMNS by a replay (engine/runs/replay.py).
 EXTRA_FRAME_COLUMNS = ("wall_ms", "extract_ms", "gbuffer_ms", "readback_ms", "lighting_ms", "upload_ms", "setup_ms",
                        "shadow_rays", "reflection_rays", "refraction_rays", "time_left_ms", "triangles")
+# A column under an older name, written as a copy of the stat it always was: frames.csv keeps
+# ``lighting_ms`` (docs/formats.md), the lighting and composite passes, i.e. ``composite_ms``.
+COPIED_FRAME_COLUMNS = {"lighting_ms": "composite_ms"}
 STAGE_COLUMNS = ("raster_ms", "select_ms", "trace_ms", "composite_ms")
 SELECTION_COLUMNS = (
     "frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S", "R",

@@ -10,13 +10,19 @@
 - ``phrt_addon/`` imports no ``bpy`` (nor ``gpu``/``mathutils``), also not through
   ``importlib.import_module("bpy")`` / ``__import__``;
 - no module of the add-on assigns a mutable object (dict, list, set, call of a class...)
-  to a module-level name outside ``engine/session.py``, except declared constants.
+  to a module-level name outside ``engine/session.py``, except declared constants;
+- no file of the project (tests and tools included) uses another module's underscore name:
+  ``from .x import _name`` or ``x._name`` where ``x`` is a project module it imported;
+- every file ``docs/DESIGN.md`` names exists: each ``path/like.py`` (or ``.md``) from the
+  repository's root, each bare ``name.py`` of its map in that row's folder, any other bare
+  ``name.py`` somewhere in the project.
 
 Plain ``ast``: nothing is imported or run.
 """
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from pathlib import Path
 
@@ -228,6 +234,75 @@ def module_state(root: Path = ROOT):
     return found
 
 
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def private_names(root: Path = ROOT):
+    """(file, line, what) of every use of another project module's underscore name, in every
+    Python file under ``root`` (tests and tools too): ``from .x import _name``, ``x._name`` or
+    ``phrt.x._name`` where the module was imported (a class's own ``_attributes`` through an
+    instance or ``self`` are not module names and are not looked at)."""
+    found = []
+    skip = SKIP_DIRS - {"tests", "tools"}
+    for path in sorted(root.rglob("*.py")):
+        relative = path.relative_to(root)
+        if relative.parts[0] in skip or any(part.startswith(".") for part in relative.parts):
+            continue
+        tree = ast.parse(path.read_text(), str(path))
+        bound = set()  # names (and dotted prefixes) bound to project modules or their names
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").split(".")[0] == PACKAGE):
+                for alias in node.names:
+                    if _is_private(alias.name):
+                        found.append((str(relative), node.lineno, f"from {'.' * node.level}{node.module or ''} "
+                                                                  f"import {alias.name}"))
+                    bound.add(alias.asname or alias.name)
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.split(".")[0] == PACKAGE:
+                        bound.add(alias.asname or alias.name)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and _is_private(node.attr):
+                owner = _dotted(node.value)
+                if owner in bound:
+                    found.append((str(relative), node.lineno, f"{owner}.{node.attr}"))
+    return sorted(found)
+
+
+def _dotted(node) -> str | None:
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    return ".".join([node.id] + list(reversed(parts))) if isinstance(node, ast.Name) else None
+
+
+_PATH = re.compile(r"(?<![\w./])([A-Za-z_][\w.-]*(?:/[\w.-]+)+\.(?:py|md))(?![\w/])")
+_BARE = re.compile(r"`([A-Za-z_][\w-]*\.py)`")
+_FOLDER = re.compile(r"`([A-Za-z_][\w/-]*/)`")
+
+
+def missing_design_paths(root: Path = ROOT, design: Path | None = None) -> list:
+    """(line, name) of every file ``docs/DESIGN.md`` (or ``design``) names that does not exist."""
+    design = root / "docs" / "DESIGN.md" if design is None else design
+    everywhere = {path.name for path in root.rglob("*.py") if ".venv" not in path.parts}
+    missing = []
+    for number, line in enumerate(design.read_text(encoding="utf-8").splitlines(), start=1):
+        missing += [(number, path) for path in _PATH.findall(line) if not (root / path).is_file()]
+        bare = [name for name in _BARE.findall(line)]
+        cells = line.split("|")
+        if line.startswith("|") and len(cells) > 2:  # a row of the map: | folders | what lives there |
+            folders = [root / folder for folder in _FOLDER.findall(cells[1])]
+            if any(name in _BARE.findall(cells[1]) for name in bare):
+                folders.append(root)  # a row of root modules (`properties.py`, ...)
+            missing += [(number, name) for name in bare
+                        if folders and not any((folder / name).is_file() for folder in folders)]
+        else:
+            missing += [(number, name) for name in bare if name not in everywhere]
+    return missing
+
+
 def main() -> int:
     graph = import_graph()
     problems = 0
@@ -247,6 +322,12 @@ def main() -> int:
     for path, name, line in module_state():
         problems += 1
         print(f"module-level state outside the session: {path}:{line} {name}")
+    for path, line, what in private_names():
+        problems += 1
+        print(f"another module's underscore name: {path}:{line} {what}")
+    for line, name in missing_design_paths():
+        problems += 1
+        print(f"docs/DESIGN.md:{line} names a file that does not exist: {name}")
     print("no problems" if not problems else f"{problems} problems")
     return 1 if problems else 0
 

@@ -32,7 +32,7 @@ def main(argv=None):
     parser.add_argument("--budget-ms", type=float, default=None)
     parser.add_argument("--resolution", default="640x480")
     args = parser.parse_args(argv)
-    from phrt import cli
+    from phrt.cli import blender_process
     from phrt.cli import bench
     from phrt.engine.runs import camera_path, replay
     timings = {}
@@ -53,19 +53,19 @@ def main(argv=None):
         for part in path:
             owner = getattr(owner, part)
         setattr(owner, name, timed(label, getattr(owner, name)))
-    cli._blender()
+    blender_process.blender()
     import bpy
-    label = cli.load_scene(args.scene)
+    label = blender_process.load_scene(args.scene)
     scene = bpy.context.scene
     width, height = (int(v) for v in args.resolution.lower().split("x"))
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
     camera = camera_path.find_path(scene, None)
     frames = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
     with tempfile.TemporaryDirectory() as temp:
-        with cli._quiet_stdout():
+        with blender_process.quiet_stdout():
             result = replay.replay(scene, camera, frames, args.mode.upper(), Path(temp) / "run", images="none",
                                    scene_label=label, budget_ms=args.budget_ms)
-        rows = bench._frame_rows(result.run_dir)
+        rows = bench.steady_rows(result.run_dir)
     print(f"{label} {args.mode.upper()} frames {args.frames} at {width}x{height}: medians over frames 4+ "
           f"(wall / calling-thread CPU ms)")
     for _, _, step in STEPS:
@@ -74,12 +74,12 @@ def main(argv=None):
             print(f"  {step:>15} {statistics.median(v[0] for v in values):7.1f} / "
                   f"{statistics.median(v[1] for v in values):6.1f}  ({len(values)} calls)")
     print("run means (frames 2+, one-time work out):", ", ".join(
-        f"{key[:-3]} {bench._mean(rows, key):.1f}" for key in
-        ("total_ms", "wall_ms", "gbuffer_ms", "lighting_ms", "select_ms", "trace_ms", "readback_ms")))
+        f"{key[:-3]} {bench.column_mean(rows, key):.1f}" for key in
+        ("total_ms", "wall_ms", "gbuffer_ms", "composite_ms", "select_ms", "trace_ms", "readback_ms")))
     totals = [row["total_ms"] for row in rows]
     if args.budget_ms:
         print(f"budget {args.budget_ms:.1f}: mean {statistics.mean(totals) / args.budget_ms:.3f}x, "
-              f"p95 {bench._p95(rows, 'total_ms') / args.budget_ms:.3f}x")
+              f"p95 {bench.column_p95(rows, 'total_ms') / args.budget_ms:.3f}x")
     return 0
 
 

@@ -81,15 +81,15 @@ class ResourceCounter:
             self._wrap(gpu.types, name, name)
         self._wrap(gpu.shader, "create_from_info", "GPUShader")
         # Embree scenes: embreex checks their type, so the tracer's owner of each is wrapped instead.
-        original_init = embree_scene._EmbreeSet.__init__
+        original_init = embree_scene.EmbreeSet.__init__
 
         def init(embree_set, *args, **kwargs):
             original_init(embree_set, *args, **kwargs)
             self.created["EmbreeScene"] = self.created.get("EmbreeScene", 0) + 1
             self._live.append(("EmbreeScene", embree_set.scene))
 
-        embree_scene._EmbreeSet.__init__ = init
-        self._restore.append((embree_scene._EmbreeSet, "__init__", original_init))
+        embree_scene.EmbreeSet.__init__ = init
+        self._restore.append((embree_scene.EmbreeSet, "__init__", original_init))
         return self
 
     def uninstall(self):
@@ -129,12 +129,12 @@ class ResourceCounter:
 def long_replay(args, counter, out):
     import bpy
 
-    from phrt import cli
+    from phrt.cli import blender_process
     from phrt.engine import final
     from phrt.engine.runs import replay
     from phrt.engine.runs import camera_path
 
-    label = cli.load_scene(args.scene)
+    label = blender_process.load_scene(args.scene)
     scene = bpy.context.scene
     camera = camera_path.find_path(scene, args.path)
     start, end = camera_path.path_frame_range(scene, camera)
@@ -150,7 +150,7 @@ def long_replay(args, counter, out):
             print(f"  frame {done}/{total}: {frame_ms:6.0f} ms, RSS {samples[-1]['rss_mb']:7.1f} MB, "
                   f"{live} GPU/Embree objects alive, {elapsed:6.0f} s", file=sys.stderr, flush=True)
 
-    with cli._quiet_stdout():  # Blender's "Saved: ..." line per frame
+    with blender_process.quiet_stdout():  # Blender's "Saved: ..." line per frame
         result = replay.replay(scene, camera, frames, "HYBRID", out / f"{label}-{camera.name}-hybrid",
                                images="exr", budget_ms=args.budget_ms, resolution=args.resolution,
                                scene_label=label, on_progress=progress, overwrite=True)
@@ -215,7 +215,7 @@ def big_mesh_scene(triangles, resolution):
 
 
 def big_mesh(args, counter, out):
-    from phrt import cli
+    from phrt.cli import blender_process
     from phrt.engine import final
     from phrt.engine.runs import replay
     from phrt.engine.runs import camera_path
@@ -227,7 +227,7 @@ def big_mesh(args, counter, out):
     for mode in ("RASTER", "HYBRID", "RAYTRACE"):
         begin = time.perf_counter()
         try:
-            with cli._quiet_stdout():
+            with blender_process.quiet_stdout():
                 replay.replay(scene, scene.camera, (1, 2), mode, out / f"big-{mode.lower()}", images="exr",
                               budget_ms=1e9 if mode != "RASTER" else None, scene_label="big", overwrite=True)
         except camera_path.ReplayError as error:
@@ -263,8 +263,8 @@ def main(argv=None):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    from phrt import cli
-    cli._blender()
+    from phrt.cli import blender_process
+    blender_process.blender()
     counter = ResourceCounter().install()
     report = {"rss_growth_limit_mb": RSS_GROWTH_LIMIT_MB}
     failures = []

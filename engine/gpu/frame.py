@@ -17,15 +17,12 @@ from __future__ import annotations
 
 import time
 
-from ...phrt_addon.scene import rules, shading
+from ...phrt_addon.scene import shading
 from ...phrt_addon.raster.gbuffer import GBuffer
 from ...phrt_addon.scene.snapshot import SceneSnapshot
 from .. import session
 from . import composite, gbuffer, lighting, readback, shadow_maps, traced_textures
 from .resources import GPUResources, gpu_module
-
-# Material indices are stored +1 in the float position target's w: exact to 2^24.
-MAX_MATERIALS = (1 << 24) - 1
 
 # The shaders every frame binds, by name (the lighting variants depend on the frame's lights).
 BUILDERS = {**gbuffer.BUILDERS, **composite.BUILDERS, shadow_maps.SHADER: shadow_maps.build}
@@ -58,12 +55,12 @@ class GPUFrame:
     # -- protocol --------------------------------------------------------------
     def draw(self):
         """G-buffer, resolve and its read-back, shadow maps; sets raster_ms and setup_ms."""
-        if len(self.snapshot.elements) > rules.MAX_ELEMENTS:
+        if len(self.snapshot.elements) > gbuffer.MAX_ELEMENTS:
             raise ValueError(f"{len(self.snapshot.elements)} ray tracing elements: the G-buffer tells at most "
-                             f"{rules.MAX_ELEMENTS} apart; tag fewer objects or materials")
-        if len(self.snapshot.materials) > MAX_MATERIALS:
+                             f"{gbuffer.MAX_ELEMENTS} apart; tag fewer objects or materials")
+        if len(self.snapshot.materials) > gbuffer.MAX_MATERIALS:
             raise ValueError(f"{len(self.snapshot.materials)} materials: the G-buffer tells at most "
-                             f"{MAX_MATERIALS} apart")
+                             f"{gbuffer.MAX_MATERIALS} apart")
         gpu = gpu_module()
         resources = self.resources
         start = time.perf_counter()
@@ -146,6 +143,7 @@ class GPUFrame:
         self.traced_flags = traced_textures.flags(uploads)
         lighting.light(gpu, self, uploads)
         combined = composite.composite(gpu, self, uploads)
-        self.stats["lighting_ms"] = _ms(start)
-        self.stats["shade_setup_ms"] = self.stats["lighting_ms"] - self.stats["traced_upload_ms"] if first_use else 0.0
+        # shade_ms: the upload of the traced results, the lighting and composite passes, the read-back.
+        self.stats["shade_ms"] = _ms(start)
+        self.stats["shade_setup_ms"] = self.stats["shade_ms"] - self.stats["traced_upload_ms"] if first_use else 0.0
         return combined

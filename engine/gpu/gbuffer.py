@@ -10,10 +10,35 @@ from __future__ import annotations
 import numpy as np
 
 from ...phrt_addon.raster import draw_chunks
-from ...phrt_addon.scene import rules
 from . import fullscreen, readback, uniforms
 
 TEXTURED, UNTEXTURED, RESOLVE = "gbuffer", "gbuffer_untextured", "resolve"
+
+# What the id targets can tell apart: element index + 1 ("none" = 0) in the 32-bit element target,
+# material index + 1 in the float position target's w (exact to 2^24).
+MAX_ELEMENTS = 0xFFFFFFFF - 1
+MAX_MATERIALS = (1 << 24) - 1
+
+# A texture as both paths sample it (phrt_addon/scene/rules.py: the image prepared once, no mipmaps).
+SAMPLE_TEXTURE = """
+// numpy twin: phrt_addon/scene/rules.py sample_texture (bilinear, wrapping, non-finite coordinates read 0)
+vec4 phrt_sample_texture(sampler2D tex, vec2 uv)
+{
+  if (isnan(uv.x) || isinf(uv.x)) { uv.x = 0.0; }
+  if (isnan(uv.y) || isinf(uv.y)) { uv.y = 0.0; }
+  ivec2 size = textureSize(tex, 0);
+  vec2 position = (uv - floor(uv)) * vec2(size) - 0.5;
+  vec2 cell = floor(position);
+  vec2 f = position - cell;
+  ivec2 c0 = ivec2(cell);  /* in [-1, size - 1]: GLSL's % is undefined for negative operands */
+  if (c0.x < 0) { c0.x += size.x; }
+  if (c0.y < 0) { c0.y += size.y; }
+  ivec2 c1 = (c0 + 1) % size;
+  vec4 bottom = mix(texelFetch(tex, ivec2(c0.x, c0.y), 0), texelFetch(tex, ivec2(c1.x, c0.y), 0), f.x);
+  vec4 top = mix(texelFetch(tex, ivec2(c0.x, c1.y), 0), texelFetch(tex, ivec2(c1.x, c1.y), 0), f.x);
+  return mix(bottom, top, f.y);
+}
+"""
 
 GBUFFER_VERT = """
 // numpy twin: phrt_addon/raster/gbuffer.py GBufferLayer (position relative to the camera, as the tracer's hits)
@@ -26,13 +51,13 @@ void main() {
 }
 """
 
-GBUFFER_FRAG = rules.GLSL_SAMPLE_TEXTURE + """
+GBUFFER_FRAG = SAMPLE_TEXTURE + """
 // numpy twin: phrt_addon/raster/gbuffer.py GBufferLayer (what one layer holds per pixel)
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) { n = -n; }
   vec4 albedo = base_color;
-  /* Sampled exactly as the tracer samples (rules.sample_texture: bilinear, wrapping).  A
+  /* Sampled exactly as the tracer samples (phrt_sample_texture: bilinear, wrapping).  A
      variant per case, not a branch: llvmpipe runs a branch's body for every fragment, and the
      sampling was 15% of arcade's G-buffer pass where most materials have no texture. */
 #if WITH_TEXTURE

@@ -78,7 +78,7 @@ def _elements(scene, camera):
 
 def _replay_steps(scene, camera, frames, mode, run_dir, *, images, resolution, label, budget_ms=None,
                   overrides=None, frame_list=None):
-    run = replay.SteppedReplay(scene, camera, frames, mode, run_dir, images=images, resolution=resolution,
+    run = replay.ReplayRun(scene, camera, frames, mode, run_dir, images=images, resolution=resolution,
                                scene_label=label, budget_ms=budget_ms, overrides=overrides, frame_list=frame_list)
     try:
         while run.remaining:

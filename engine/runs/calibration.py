@@ -23,7 +23,7 @@ CALIBRATION_FRAMES = 3
 def calibrate(scene, camera, frame_range, fraction, *, runner, resolution=None,
               scene_label=None) -> mode_budgets.BudgetResolution:
     """Render a few frames of each mode and resolve ``fraction`` from their steady means.
-    ``runner`` is ``replay.SteppedReplay`` (passed in: the replay resolves its budget here)."""
+    ``runner`` is ``replay.ReplayRun`` (passed in: the replay resolves its budget here)."""
     frames = mode_budgets.calibration_frames(frame_range, CALIBRATION_FRAMES)
     means = {}
     with tempfile.TemporaryDirectory(prefix="phrt-calibration-") as folder:

@@ -59,6 +59,12 @@ def parse_frames(text, default_range) -> tuple[int, int]:
             raise ValueError
     except ValueError:
         raise ReplayError(f"malformed frame range '{text}': use A-B with integers, e.g. --frames 1-120") from None
-    if end < start:
-        raise ReplayError(f"frame range '{text}' ends before it starts: use A-B with A <= B")
+    check_frame_range(start, end)
     return start, end
+
+
+def check_frame_range(start, end):
+    """ReplayError unless the frame range ``start``-``end`` runs forward (the one check of it: the
+    replay, both operators and the ``phrt`` command ask it)."""
+    if end < start:
+        raise ReplayError(f"frame range {start}-{end} ends before it starts: give a last frame >= the first")

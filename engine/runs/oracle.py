@@ -28,7 +28,7 @@ class ForcedRenderer:
 
     def __init__(self, scene, camera, resolution=None):
         self.scene, self.camera, self.resolution = scene, camera, resolution
-        self.session = None
+        self.state = None
 
     def __enter__(self):
         scene, render = self.scene, self.scene.render
@@ -42,11 +42,11 @@ class ForcedRenderer:
         settings = extract.read_settings(scene)
         settings.mode = "HYBRID"
         settings.budget_at = None
-        self.session = final.ReplaySession(settings_override=settings, camera=self.camera).__enter__()
+        self.state = final.ReplayState(settings_override=settings, camera=self.camera).__enter__()
         return self
 
     def __exit__(self, *exc):
-        self.session.__exit__(None, None, None)
+        self.state.__exit__(None, None, None)
         scene, render, saved = self.scene, self.scene.render, self._saved
         scene.camera = saved["camera"]
         scene.frame_set(saved["frame"])
@@ -57,10 +57,10 @@ class ForcedRenderer:
     def render(self, frame, names):
         if self.scene.frame_current != frame:
             self.scene.frame_set(frame)
-        self.session.renderer.forced_selection = frozenset(names)
+        self.state.renderer.forced_selection = frozenset(names)
         bpy.ops.render.render(write_still=False)
-        result = self.session.last_result
-        self.session.last_result = None
+        result = self.state.last_result
+        self.state.last_result = None
         if result is None:
             raise RuntimeError(f"frame {frame} was stopped while rendering")
         image = np.ascontiguousarray(result.passes.combined[::-1, :, :3], dtype=np.float32)

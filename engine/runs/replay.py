@@ -7,7 +7,7 @@ A camera path is an animated camera object; its frame range is its
 animation's (keyframes, or the scene range for a Follow Path constraint).
 Frames are rendered one ``render.render()`` call at a time, with the state a
 replay carries (Embree scenes uploaded once, cost model, last selection) held
-by a ``ReplaySession``; after each frame the image is written and the logs are
+by a ``ReplayState``; after each frame the image is written and the logs are
 flushed, so a cancelled replay leaves complete frames and logs only.
 
 A run folder has one writer (``.phrt-lock``, ``runs/lock.py``): a second replay into a live
@@ -41,9 +41,9 @@ from ...phrt_addon.runs import run_log
 from ...phrt_addon import schema
 from ...phrt_addon.runs import folder as run_folder
 from ...phrt_addon.runs import lock, run_files, work
-from ...phrt_addon.schema import EXTRA_FRAME_COLUMNS, REPLAY_ORDER
+from ...phrt_addon.schema import COPIED_FRAME_COLUMNS, EXTRA_FRAME_COLUMNS, REPLAY_ORDER
 from .. import extract, final
-from .camera_path import ReplayError
+from .camera_path import ReplayError, check_frame_range
 from .interrupts import captured_stderr, stop_on_signals
 
 # Hybrid last: with a budget between the modes (Budget At), a replay of several modes resolves it
@@ -84,14 +84,32 @@ class ReplayResult:
     problems: list = dataclasses.field(default_factory=list)  # one line per distinct problem, with its count
 
 
+def check_input(*, mode=None, images=None, budget_ms=None, budget_at=None, frame_range=None):
+    """ReplayError unless the replay arguments given are valid: the one check of them, made by
+    ``ReplayRun`` and, before anything is loaded or written, by the ``phrt`` command (whose option
+    names the messages use: the parameters are named alike)."""
+    if mode is not None and str(mode).upper() not in MODES:
+        raise ReplayError(f"unknown mode '{mode}': use raster, hybrid or raytrace")
+    if images is not None and images not in IMAGE_FORMATS:
+        raise ReplayError(f"unknown image format '{images}': use exr, png or none")
+    if budget_ms is not None and not budget_ms >= 0:
+        raise ReplayError(f"budget {budget_ms:g} ms is not >= 0: give --budget-ms a frame time >= 0")
+    if budget_at is not None and not 0.0 <= budget_at <= 1.0:
+        raise ReplayError(f"--budget-at {budget_at:g} is outside 0..1: give the fraction of the way from raster (0) "
+                          f"to ray traced (1) frame time, e.g. --budget-at 0.33")
+    if frame_range is not None:
+        check_frame_range(*frame_range)
+
+
 class ReplayInterrupted(ReplayError):
     """The frame's render was stopped (Esc during a render): nothing of it was kept."""
 
 
-class SteppedReplay:
-    """A replay one frame per ``step()`` (the modal operator); ``replay()`` loops over it.
+class ReplayRun:
+    """One replay of a camera path into one RUN_DIR, rendered a frame per ``step()`` (the modal
+    operator steps it from a timer; ``replay()`` loops over it).
 
-    ``run = SteppedReplay(...)``; ``while run.remaining: run.step()``;
+    ``run = ReplayRun(...)``; ``while run.remaining: run.step()``;
     ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
     An exception in ``step()`` restores the scene and leaves the complete rows
     written so far (like ``replay()``); ``ReplayInterrupted`` (the render itself was
@@ -100,19 +118,9 @@ class SteppedReplay:
     def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
                  resolution=None, scene_label=None, budget_at=None, budget_search_dirs=None,
                  overrides=None, frame_list=None, overwrite=False):
+        check_input(mode=mode, images=images, budget_ms=budget_ms, budget_at=budget_at, frame_range=frame_range)
         mode = mode.upper()
-        if mode not in MODES:
-            raise ReplayError(f"unknown mode '{mode}': use one of {', '.join(m.lower() for m in MODES)}")
-        if images not in IMAGE_FORMATS:
-            raise ReplayError(f"unknown image format '{images}': use exr, png or none")
-        if budget_ms is not None and not budget_ms >= 0:
-            raise ReplayError(f"budget must be a number of milliseconds >= 0, not {budget_ms}")
         start, end = frame_range
-        if end < start:
-            raise ReplayError(f"frame range {start}-{end} ends before it starts")
-        if budget_at is not None and not 0.0 <= budget_at <= 1.0:
-            raise ReplayError(f"budget-at must be a fraction within 0..1 (0 = raster, 1 = ray traced frame "
-                              f"time), not {budget_at}")
         requested_budget_ms = budget_ms
         settings = extract.read_settings(scene)
         for key, value in (overrides or {}).items():
@@ -126,7 +134,7 @@ class SteppedReplay:
         if budget_ms is None and fraction is not None and mode == "HYBRID":
             from . import calibration as budget_module
             resolved = budget_module.resolve(
-                scene, camera, frame_range, fraction, runner=SteppedReplay, resolution=resolution,
+                scene, camera, frame_range, fraction, runner=ReplayRun, resolution=resolution,
                 scene_label=scene_label,
                 search_dirs=[Path(run_dir).parent] if budget_search_dirs is None else budget_search_dirs)
             budget_ms = resolved.budget_ms
@@ -141,12 +149,6 @@ class SteppedReplay:
             self._lock = run_folder.take(self.run_dir, overwrite)
         except run_folder.FolderError as error:
             raise ReplayError(str(error)) from None
-        try:
-            self.frames_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as error:
-            self._lock.release()
-            raise ReplayError(f"cannot write to output folder '{self.run_dir}': "
-                              f"{error.strerror or error}") from None
         self._work = work.work_record(bpy.data.filepath or None, (start, end), (width, height), mode=mode,
                                       images=images, budget_ms=requested_budget_ms, budget_at=fraction,
                                       overrides=overrides)
@@ -196,7 +198,7 @@ class SteppedReplay:
             self._lock.release()
             self._restore()
             raise
-        self.session = final.ReplaySession(settings_override=self.settings, camera=camera).__enter__()
+        self.state = final.ReplayState(settings_override=self.settings, camera=camera).__enter__()
         self._open = True
 
     @property
@@ -210,9 +212,9 @@ class SteppedReplay:
     def step(self) -> dict:
         """Render, write and log the next frame; returns its stats."""
         if not self._open or not self.remaining:
-            raise ValueError("SteppedReplay: no frame left to render")
+            raise ValueError("ReplayRun: no frame left to render")
         frame = self.frames[self.done]
-        scene, render, session = self.scene, self.scene.render, self.session
+        scene, render, state = self.scene, self.scene.render, self.state
         try:
             scene.frame_set(frame)
             if not self._budget_fixed:
@@ -223,7 +225,7 @@ class SteppedReplay:
             with captured_stderr() as blender_said:
                 bpy.ops.render.render(write_still=self.images != "none")
             wall_ms = (time.perf_counter() - begin) * 1000.0
-            result = session.last_result
+            result = state.last_result
             if result is None:  # a failed render raises RuntimeError: this one was stopped
                 self._drop_partial_images(frame)
                 raise ReplayInterrupted(f"frame {frame} was stopped while rendering")
@@ -231,10 +233,10 @@ class SteppedReplay:
                 self._commit_image(frame, blender_said)
             blender_said.forward()
             row = {key: result.stats.get(key) for key in schema.FRAME_COLUMNS}
-            row.update({key: result.stats.get(key) for key in EXTRA_FRAME_COLUMNS})
+            row.update({key: result.stats.get(COPIED_FRAME_COLUMNS.get(key, key)) for key in EXTRA_FRAME_COLUMNS})
             row["wall_ms"] = wall_ms
             self.log.add_frame(row, result.selection_rows)
-            session.last_result = None
+            state.last_result = None
         except ReplayInterrupted:
             raise
         except OSError as error:  # a full disk or a file-size limit while writing the logs
@@ -286,7 +288,7 @@ class SteppedReplay:
         """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
         the scene (``restore_scene=False`` when Blender is discarding it)."""
         if not self._open:
-            raise ValueError("SteppedReplay: already finished")
+            raise ValueError("ReplayRun: already finished")
         cancelled = bool(cancelled and self.remaining)
         problems = self.problem_lines()
         written = self._close(summary={**self._run_facts(), "cancelled": cancelled, "partial": bool(self.remaining)},
@@ -296,11 +298,11 @@ class SteppedReplay:
 
     def problem_lines(self) -> list:
         """Each problem of the run once, with the number of frames it came up on."""
-        return self.session.renderer.problems.lines(self.done)
+        return self.state.renderer.problems.lines(self.done)
 
     def _run_facts(self) -> dict:
         return {**self._summary, "frames_planned": self.total,
-                "problems": self.session.renderer.problems.summary()}
+                "problems": self.state.renderer.problems.summary()}
 
     def _close(self, summary, restore_scene=True):
         if not self._open:
@@ -311,7 +313,7 @@ class SteppedReplay:
             written = self.log.close(summary)
         finally:
             self._lock.release()
-            self.session.__exit__(None, None, None)
+            self.state.__exit__(None, None, None)
             if restore_scene:
                 self._restore()
         return written
@@ -350,7 +352,7 @@ def replay(scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms
     ``summary.json`` (``budget_source``).  ``overrides`` sets fields of the scene's settings
     (``phrt_addon.scene.Settings``) for this replay only.  ``overwrite`` lets the replay replace
     another run in ``run_dir`` (its files are removed first); without it such a folder is refused."""
-    run = SteppedReplay(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
+    run = ReplayRun(scene, camera, frame_range, mode, run_dir, images=images, budget_ms=budget_ms,
                         resolution=resolution, scene_label=scene_label, budget_at=budget_at,
                         budget_search_dirs=budget_search_dirs, overrides=overrides, overwrite=overwrite)
     cancelled = False

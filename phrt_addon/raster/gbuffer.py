@@ -19,6 +19,10 @@ import numpy as np
 
 @dataclass
 class GBufferLayer:
+    """One layer of the G-buffer: what the raster pass leaves per pixel (below).
+
+    GLSL twin: engine/gpu/gbuffer.py GBUFFER_VERT.main (the position relative to the camera)
+    GLSL twin: engine/gpu/gbuffer.py GBUFFER_FRAG.main (what one layer holds per pixel)"""
     covered: np.ndarray  # (h, w) bool: a surface was drawn here
     position: np.ndarray  # (h, w, 3) float32, world position minus GBuffer.origin
     normal: np.ndarray  # (h, w, 3) float32 unit shading normal, facing the camera
@@ -61,7 +65,9 @@ class GBuffer:
         return self.opaque.covered.shape[1]
 
     def front_element(self) -> np.ndarray:
-        """Element index of the front-most surface of each pixel (transparent over opaque)."""
+        """Element index of the front-most surface of each pixel (transparent over opaque).
+
+        GLSL twin: engine/gpu/gbuffer.py RESOLVE_FRAG.main (and front_normal, view_depth)"""
         return np.where(self.transparent.covered, self.transparent.element, self.opaque.element)
 
     def front_normal(self) -> np.ndarray:

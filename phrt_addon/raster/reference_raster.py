@@ -64,6 +64,14 @@ class ReferenceRaster:
         return self._change
 
     def shade(self, traced=None, measure_change=False) -> np.ndarray:
+        """Combined (h, w, 4) of the frame, lit and composited as the GPU frame's ``shade()``;
+        ``measure_change``: also what the traced terms changed (``traced_change``).
+
+        GLSL twin: engine/gpu/surface_glsl.py shade_layer (one layer's colour)
+        GLSL twin: engine/gpu/lighting_glsl.py light_layer (one light's term at one layer)
+        GLSL twin: engine/gpu/lighting_glsl.py main (a layer's lights, and the opaque composite)
+        GLSL twin: engine/gpu/composite.py composite_pixel (the composite of both layers)
+        GLSL twin: engine/gpu/composite.py main (with measure_change: the traced change)"""
         if measure_change:
             with_traced = self._shade(traced)
             without = self._shade(None)

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene import lights
+
 NORMAL_OFFSET_TEXELS = 1.5
 DEPTH_BIAS_TEXELS = 1.0
 
@@ -45,7 +47,9 @@ class LightView:
 @dataclass
 class ShadowMap:
     """One view's map as numpy: ``linear`` is the light-space depth along the view axis per
-    texel (what the GPU stores, R32F), flat, row 0 at the bottom."""
+    texel (what the GPU stores, R32F), flat, row 0 at the bottom.
+
+    GLSL twin: engine/gpu/shadow_maps.py SHADOW_FRAG.main (the linear light-space depth per texel)"""
 
     view: LightView
     depth: np.ndarray | None = None  # (size, size) float32 window depth in [0, 1] (hardware depth)
@@ -106,7 +110,9 @@ def cube_face_view(points) -> tuple[np.ndarray, np.ndarray]:
     relative to a cube map's centre: each face's view (``look_at`` of its axis) is a signed
     permutation of the axes, so the GLSL lookup (``engine/gpu/lighting_glsl.py``, ``cube_face_view``)
     computes it with selects instead of reading a matrix per pixel.  Ties go to x, then y
-    (as the GLSL)."""
+    (as the GLSL).
+
+    GLSL twin: engine/gpu/lighting_glsl.py cube_face_view"""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     a = np.abs(p)
     x_major = (a[:, 0] >= a[:, 1]) & (a[:, 0] >= a[:, 2])
@@ -126,11 +132,14 @@ def _corners(bounds):
 
 
 def light_views(light, bounds, size) -> list[LightView]:
-    """The shadow-map views of ``light`` covering the scene ``bounds`` ((min, max) world)."""
+    """The shadow-map views of ``light`` covering the scene ``bounds`` ((min, max) world).
+
+    GLSL twin: engine/gpu/shadow_maps.py SHADOW_VERT.main (each view's view_proj_relative and axis)"""
     low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
     extent = max(float(np.max(high - low)), 1e-6)
     corners = _corners(bounds)
-    if light.kind == "SUN":
+    kind = lights.kind(light)
+    if kind is lights.LightKind.SUN:
         origin = (low + high) / 2.0
         view = look_at(light.direction)
         local = (corners - origin) @ view[:3, :3].T
@@ -145,7 +154,7 @@ def light_views(light, bounds, size) -> list[LightView]:
     distances = np.linalg.norm(corners - origin, axis=1)
     far = max(float(distances.max()), 1e-3) * 1.01
     near = max(far * 1e-4, 1e-4 * extent, 1e-6)
-    if light.kind == "SPOT":
+    if kind is lights.LightKind.SPOT:
         fov = min(float(light.spot_size) * 1.05 + 0.02, np.radians(170.0))
         return [LightView(origin, look_at(light.direction), perspective(fov, near, far), size, False,
                           near, far, fov / size)]
@@ -219,7 +228,9 @@ def shadow_visibility(shadow_maps, points, normals, origin=None) -> np.ndarray:
     """Lit fraction in [0,1] of each point for one light's maps.  ``points`` (N,3) are world
     positions, or positions relative to ``origin`` (e.g. camera-relative float32 G-buffer
     positions: the lookup then runs in float32).  Points outside every map are lit (nothing
-    was drawn there to occlude them)."""
+    was drawn there to occlude them).
+
+    GLSL twin: engine/gpu/lighting_glsl.py shadow_lit"""
     if origin is None:
         points = np.asarray(points, dtype=np.float64)
         origin = np.zeros(3)

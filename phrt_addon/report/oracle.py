@@ -364,12 +364,12 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
             "frames_oracle_differs": sum(1 for row in rows if row["oracle"] != row["heuristic"]),
             "budget_ms": rows[0]["budget_ms"] if rows else None,
         }
-    info = run_log._round_json(run_log._json_safe({
+    info = run_log.json_ready({
         "every": every, "frames": list(frames), "runs": runs, "capped": capped or {}, "timings": TIMINGS,
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "
         "benefit and cost within the budget's nominal time for tracing (budget - the raster run's raster and "
-        "composite ms on that frame), its subset rendered and measured; unweighted by K"}))
+        "composite ms on that frame), its subset rendered and measured; unweighted by K"})
     atomic.write_text(folder / ORACLE_JSON, json.dumps(info, indent=2, allow_nan=False) + "\n")
     return info

@@ -173,5 +173,5 @@ def write_sweep(csv_path, json_path, rows, oracle_results):
                 "oracle": None if oracle_results is None else {
                     "every": oracle_results.info.get("every"), "frames": oracle_results.info.get("frames"),
                     "note": oracle_results.info.get("note")}}
-    document = run_log._round_json(run_log._json_safe(document))
+    document = run_log.json_ready(document)
     atomic.write_text(json_path, json.dumps(document, indent=2, allow_nan=False) + "\n")

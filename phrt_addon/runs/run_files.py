@@ -1,5 +1,5 @@
 """The files of a RUN_DIR (docs/formats.md), read back: the logs as typed rows, the summary, the
-images, whether an image file was written to its end; and whether a folder can hold a run.
+images, whether an image file was written to its end.
 
 The writer is ``run_log.RunLog``; ``summary.json`` is its commit record (it exists from the run's
 start and is rewritten as frames complete): :func:`read_frames` reads the first
@@ -16,7 +16,6 @@ import csv
 import io
 import json
 import struct
-import os
 from pathlib import Path
 
 import numpy as np
@@ -289,17 +288,3 @@ def _exr_is_complete(handle, size) -> bool:
             return False
         handle.seek(position)
     return True
-
-
-def output_dir_problem(path):
-    """Why the folder ``path`` cannot be created and written, or None if it can.
-    Creates nothing: bad input is refused before anything is written."""
-    path = Path(path).resolve()
-    existing = path
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        return f"cannot write to output folder '{path}': '{existing}' is a file, not a folder"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return f"cannot write to output folder '{path}': permission denied on '{existing}'"
-    return None

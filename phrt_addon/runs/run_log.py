@@ -109,6 +109,12 @@ def _round_json(value):
     return value
 
 
+def json_ready(value):
+    """``value`` as PHRT writes a JSON document: every number finite or null, floats rounded to
+    6 significant digits, numpy arrays as lists, keys as strings."""
+    return _round_json(_json_safe(value))
+
+
 class _CsvTable:
     """One CSV file with a fixed header, written row by row."""
 
@@ -306,7 +312,7 @@ class RunLog:
                                                    if table is not None)
         summary["machine"] = machine_info()
         summary.update(summary_extra)
-        summary = _round_json(_json_safe(summary))
+        summary = json_ready(summary)
         atomic.write_text(self.run_dir / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
         self._summary_written_at = self._clock()
         self.summaries_written += 1

@@ -1,5 +1,6 @@
-"""Lights as the numpy shading (``shading.py``) and the GPU light packing
-(``engine/gpu/light_struct.py``) both see them: the kinds, the spot cone and the soft radius.
+"""Lights as the numpy shading (``shading.py``), the shadow maps (``raster/shadowmap.py``), the
+shadow regions (``trace/shadow_region.py``) and the GPU light packing (``engine/gpu/light_struct.py``)
+all see them: the kinds, the spot cone and the soft radius.
 
 ``Light.kind`` is Blender's light type ("SUN", "POINT", "SPOT", "AREA"); the GLSL lighting
 compares the integer of ``LightKind`` (compiled into each light slot of a lighting variant).

@@ -33,11 +33,8 @@ How a texture is sampled (``prepare_texture``, ``texture_coordinates``, ``sample
     gets exactly this image (no mipmaps).  Texture coordinates: a mesh without a UV map
     reads (0, 0) at every corner, as Blender reads a missing attribute, and a non-finite
     coordinate reads 0.  Sampling is bilinear between texel centres with wrap-around
-    (repeat) on both axes, in float32: ``sample_texture`` in numpy for the tracer and
-    ``GLSL_SAMPLE_TEXTURE`` on the GPU for the raster pass.
-
-What an element id may hold (``MAX_ELEMENTS``)
-    The largest number of elements the G-buffer's element-id target can tell apart.
+    (repeat) on both axes, in float32: ``sample_texture`` in numpy for the tracer and its GLSL
+    twin ``phrt_sample_texture`` (``engine/gpu/gbuffer.py``) on the GPU for the raster pass.
 
 Plain numpy, no ``bpy``.
 """
@@ -53,8 +50,6 @@ MIN_IOR = 1.0
 MAX_IOR = 4.0
 DEFAULT_IOR = 1.5
 MAX_TEXTURE_SIZE = 2048
-# Element ids are stored +1 ("none" = 0) in the G-buffer's 32-bit id target (engine/gpu/gbuffer.py).
-MAX_ELEMENTS = 0xFFFFFFFF - 1
 
 
 # -- materials -------------------------------------------------------------------------------------
@@ -165,7 +160,9 @@ def texture_coordinates(corner_uvs, n_corners: int) -> np.ndarray:
 def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Bilinear, wrapping lookup of a prepared texture at (N, 2) coordinates: (N, 4) float32.
     Texel (i, j) has its centre at ((i + 0.5) / w, (j + 0.5) / h); row 0 is v = 0.
-    The same arithmetic as ``GLSL_SAMPLE_TEXTURE``, in float32."""
+    The same arithmetic as the GLSL twin, in float32.
+
+    GLSL twin: engine/gpu/gbuffer.py phrt_sample_texture"""
     height, width = texture.shape[:2]
     uv = np.nan_to_num(np.asarray(uv, dtype=np.float32).reshape(-1, 2), nan=0.0, posinf=0.0, neginf=0.0)
     wrapped = uv - np.floor(uv)
@@ -181,24 +178,3 @@ def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     top = texture[y1, x0] * (1 - fx) + texture[y1, x1] * fx
     return (bottom * (1 - fy) + top * fy).astype(np.float32)
 
-
-# The GPU twin of ``sample_texture`` (GLSL, for a sampler2D of the prepared image).
-GLSL_SAMPLE_TEXTURE = """
-vec4 phrt_sample_texture(sampler2D tex, vec2 uv)
-{
-  /* phrt_addon/scene/rules.py sample_texture: bilinear, wrapping, non-finite coordinates read 0. */
-  if (isnan(uv.x) || isinf(uv.x)) { uv.x = 0.0; }
-  if (isnan(uv.y) || isinf(uv.y)) { uv.y = 0.0; }
-  ivec2 size = textureSize(tex, 0);
-  vec2 position = (uv - floor(uv)) * vec2(size) - 0.5;
-  vec2 cell = floor(position);
-  vec2 f = position - cell;
-  ivec2 c0 = ivec2(cell);  /* in [-1, size - 1]: GLSL's % is undefined for negative operands */
-  if (c0.x < 0) { c0.x += size.x; }
-  if (c0.y < 0) { c0.y += size.y; }
-  ivec2 c1 = (c0 + 1) % size;
-  vec4 bottom = mix(texelFetch(tex, ivec2(c0.x, c0.y), 0), texelFetch(tex, ivec2(c1.x, c0.y), 0), f.x);
-  vec4 top = mix(texelFetch(tex, ivec2(c0.x, c1.y), 0), texelFetch(tex, ivec2(c1.x, c1.y), 0), f.x);
-  return mix(bottom, top, f.y);
-}
-"""

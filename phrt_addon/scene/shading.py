@@ -32,7 +32,9 @@ INV_PI = 1.0 / np.pi
 @dataclass
 class SurfaceSamples:
     """N shading points (whole arrays).  Terms every light needs (F0, diffuse weight,
-    GGX alpha, n.v) are computed once here instead of once per light."""
+    GGX alpha, n.v) are computed once here instead of once per light.
+
+    GLSL twin: engine/gpu/surface_glsl.py read_surface"""
 
     position: np.ndarray  # (N,3) world, relative to the caller's origin
     normal: np.ndarray  # (N,3) unit, facing the viewer
@@ -73,7 +75,9 @@ def dot(a, b):
 
 
 class MaterialTable:
-    """Per-material parameters as arrays indexed by material index."""
+    """Per-material parameters as arrays indexed by material index.
+
+    GLSL twin: engine/gpu/surface_glsl.py material_row"""
 
     def __init__(self, materials):
         count = max(len(materials), 1)
@@ -115,6 +119,9 @@ def normalize(vectors):
 
 
 def f0_dielectric(ior):
+    """Reflectance at normal incidence of a dielectric of index ``ior`` (in air).
+
+    GLSL twin: engine/gpu/surface_glsl.py f0_dielectric"""
     return ((ior - 1.0) / (ior + 1.0)) ** 2
 
 
@@ -126,18 +133,25 @@ def specular_f0(albedo, metallic, ior):
 def specular_f90(f0):
     """Reflectance at grazing incidence: 1, fading to 0 for a surface with (almost) no
     specular reflection at all (F0 below 2%, i.e. IOR below ~1.33; Schlick's 1 at grazing
-    would give an IOR-1 surface, which reflects nothing, a bright rim)."""
+    would give an IOR-1 surface, which reflects nothing, a bright rim).
+
+    GLSL twin: engine/gpu/surface_glsl.py specular_f90"""
     return np.clip(50.0 * np.mean(f0, axis=-1, keepdims=True), 0.0, 1.0)
 
 
 def fresnel_schlick(f0, cos_theta):
+    """Schlick's Fresnel from ``f0`` towards ``specular_f90(f0)`` at grazing ``cos_theta``.
+
+    GLSL twin: engine/gpu/surface_glsl.py fresnel_schlick"""
     cos_theta = np.clip(cos_theta, 0.0, 1.0)
     return f0 + (specular_f90(f0) - f0) * ((1.0 - cos_theta) ** 5)[:, None]
 
 
 def fresnel_dielectric(cos_incident, eta):
     """Exact unpolarised Fresnel reflectance for relative IOR ``eta`` = n_transmitted / n_incident.
-    Returns 1 under total internal reflection."""
+    Returns 1 under total internal reflection.
+
+    GLSL twin: engine/gpu/surface_glsl.py fresnel_dielectric"""
     cos_i = np.clip(np.abs(cos_incident), 0.0, 1.0)
     sin2_t = (1.0 - cos_i ** 2) / (eta ** 2)
     total = sin2_t > 1.0
@@ -166,7 +180,9 @@ def refract(incident, normal, eta):
 
 
 def brdf_cosine(surface: SurfaceSamples, light_dir):
-    """BRDF times cos(theta_light): (N,3), for unit ``light_dir`` (surface to light)."""
+    """BRDF times cos(theta_light): (N,3), for unit ``light_dir`` (surface to light).
+
+    GLSL twin: engine/gpu/surface_glsl.py brdf_cosine"""
     n_dot_l = dot(surface.normal, light_dir)
     lit = n_dot_l > 0.0
     n_dot_l = np.clip(n_dot_l, 0.0, 1.0)
@@ -191,7 +207,9 @@ def brdf_cosine(surface: SurfaceSamples, light_dir):
 def light_incidence(light, position, origin):
     """For points (N,3, relative to ``origin``): unit direction to the light, distance to it
     (inf for the sun) and the irradiance arriving there (N,3), before shadows and cosine.
-    Works in the precision of ``position`` (float32 for camera-relative G-buffer points)."""
+    Works in the precision of ``position`` (float32 for camera-relative G-buffer points).
+
+    GLSL twin: engine/gpu/lighting_glsl.py incidence"""
     position = np.asarray(position)
     dtype = position.dtype if position.dtype in (np.float32, np.float64) else np.float64
     color = np.asarray(light.color, dtype=np.float64).astype(dtype)
@@ -236,7 +254,9 @@ def environment_fresnel(f0, n_dot_v, roughness):
 
 
 def finite(image, limit=1e6):
-    """Clamp to finite, non-negative radiance: no NaN or Inf ever leaves a stage."""
+    """Clamp to finite, non-negative radiance: no NaN or Inf ever leaves a stage.
+
+    GLSL twin: engine/gpu/surface_glsl.py finite_radiance"""
     return np.clip(np.nan_to_num(image, nan=0.0, posinf=limit, neginf=0.0), 0.0, limit)
 
 

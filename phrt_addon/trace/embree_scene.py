@@ -122,7 +122,7 @@ class _Geometry:
         return self._elements
 
 
-class _EmbreeSet:
+class EmbreeSet:
     """One Embree scene and the geometry table behind its geomIDs, in a cluster's frame."""
 
     def __init__(self, entries, casts_shadow: bool, offset, extent):
@@ -255,7 +255,7 @@ class TraceScene:
             offset = cluster_origin - self.origin
             for flag, entries in ((True, casters), (False, others)):
                 if entries:
-                    sets.append(_EmbreeSet(entries, flag, offset, extents[cluster]))
+                    sets.append(EmbreeSet(entries, flag, offset, extents[cluster]))
         return sets
 
     def to_trace(self, world_points):

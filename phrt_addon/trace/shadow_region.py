@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import shading
+from ..scene import lights, shading
 from ..scene.snapshot import transform_points
 
 
@@ -65,7 +65,7 @@ def shadow_region(light, bounds, points) -> np.ndarray:
     low, high = bounds
     centre = (low + high) / 2.0
     radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
-    if light.kind == "SUN":
+    if lights.kind(light) is lights.LightKind.SUN:
         direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
         relative = points - centre
         along = relative @ direction  # > 0: downstream of the caster
@@ -98,11 +98,12 @@ class ShadowRegionIndex:
 
     def __init__(self, light, points):
         self.light = light
+        self.sun = lights.kind(light) is lights.LightKind.SUN  # parallel rays: a cylinder, not a cone
         points = np.asarray(points, dtype=np.float64)
         self.n = len(points)
         self.queries = 0
         self.order = None
-        if light.kind == "SUN":
+        if self.sun:
             direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
             helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
             across = shading.normalize(np.cross(direction, helper))
@@ -119,7 +120,7 @@ class ShadowRegionIndex:
         low, high = bounds
         centre = (low + high) / 2.0
         radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
-        if self.light.kind == "SUN":
+        if self.sun:
             cu, cv, cw = self.basis @ centre
             du = coords[:, 0] - np.float32(cu)
             dv = coords[:, 1] - np.float32(cv)
@@ -137,7 +138,7 @@ class ShadowRegionIndex:
         low, high = bounds
         centre = (low + high) / 2.0
         radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
-        if self.light.kind == "SUN":
+        if self.sun:
             key = float(self.basis[0] @ centre)
             reach = radius
         else:
@@ -227,6 +228,7 @@ class TiledShadowRegions:
 
     def __init__(self, light, points, chunks: PointChunks | None = None):
         self.light = light
+        self.sun = lights.kind(light) is lights.LightKind.SUN  # parallel rays: a cylinder, not a cone
         self.points = np.asarray(points, dtype=np.float64)
         self.n = len(self.points)
         self.chunks = chunks if chunks is not None else PointChunks(self.points)
@@ -234,7 +236,7 @@ class TiledShadowRegions:
             raise ValueError(f"chunks of {self.chunks.n} points for {self.n} points")
         self.queries = 0
         self.points_tested = 0
-        if light.kind == "SUN":
+        if self.sun:
             self.direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
         else:
             self.origin = np.asarray(light.position, dtype=np.float64)
@@ -249,9 +251,9 @@ class TiledShadowRegions:
         with np.errstate(invalid="ignore", over="ignore"):
             # float64 rounding: a few ulps of the largest magnitude involved
             slack = 1e-9 * (np.abs(chunk_centre).max(axis=1) + chunk_radius + float(np.abs(centre).max()) + radius
-                            + (0.0 if self.light.kind == "SUN" else float(np.abs(self.origin).max()))) + 1e-6
+                            + (0.0 if self.sun else float(np.abs(self.origin).max()))) + 1e-6
             reach = chunk_radius + slack
-            if self.light.kind == "SUN":
+            if self.sun:
                 relative = chunk_centre - centre
                 along = relative @ self.direction
                 lateral = np.sqrt(np.maximum(np.sum(relative * relative, axis=1) - along * along, 0.0))

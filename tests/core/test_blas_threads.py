@@ -29,5 +29,5 @@ def test_a_limit_is_restored_when_the_block_raises():
 
 
 def test_only_blas_libraries_are_listed():
-    for path in blas_threads._loaded_libraries():
+    for path in blas_threads.loaded_libraries():
         assert "blas" in path.rsplit("/", 1)[-1].lower()

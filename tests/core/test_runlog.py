@@ -212,7 +212,7 @@ def test_format_value_cleans_every_non_finite_kind():
 
 
 def test_output_dir_problem_refuses_a_folder_under_a_file_and_creates_nothing(tmp_path):
-    from phrt.phrt_addon.runs.run_files import output_dir_problem
+    from phrt.phrt_addon.runs.folder import output_dir_problem
     blocker = tmp_path / "file.txt"
     blocker.write_text("x")
     assert output_dir_problem(tmp_path / "new" / "run") is None

@@ -38,6 +38,22 @@ def test_the_whole_project_is_checked_and_has_no_problems():
             "phrt.sample_scenes"} <= tops
     assert check.oversized() == []
     assert check.package_cycles(check.import_graph()) == []
+    assert check.private_names() == []
+
+
+def test_the_private_name_rule_finds_another_modules_underscore_names_in_tests_and_tools_too(tmp_path):
+    for folder in ("engine", "tools"):
+        (tmp_path / folder).mkdir()
+    (tmp_path / "engine" / "own.py").write_text(
+        "import numpy as np\n\nclass Thing:\n    def go(self):\n        return self._state, np._NoValue\n")
+    (tmp_path / "engine" / "user.py").write_text(
+        "from . import own\nfrom .own import _helper\n\ndef run():\n    return own._helper(), own.Thing().go()\n")
+    (tmp_path / "tools" / "script.py").write_text(
+        "import phrt.engine.own\nfrom phrt.engine import own as o\n\n"
+        "phrt.engine.own._cache, o._cache, o.__name__\n")
+    assert check.private_names(tmp_path) == [
+        ("engine/user.py", 2, "from .own import _helper"), ("engine/user.py", 5, "own._helper"),
+        ("tools/script.py", 4, "o._cache"), ("tools/script.py", 4, "phrt.engine.own._cache")]
 
 
 def test_the_size_rule_finds_a_long_module_in_any_package(tmp_path):
@@ -67,3 +83,24 @@ def test_the_core_rule_finds_bpy_imported_through_importlib(tmp_path):
     (tmp_path / "phrt_addon" / "plain.py").write_text("import gpu\n")
     assert sorted(check.blender_imports_in_core(tmp_path)) == [("phrt_addon/plain.py", "gpu"),
                                                              ("phrt_addon/sneaky.py", "bpy")]
+
+
+def test_every_file_docs_design_names_exists():
+    assert check.missing_design_paths() == []
+
+
+def test_the_design_path_rule_finds_a_file_that_is_gone(tmp_path):
+    for folder in ("engine/gpu", "docs"):
+        (tmp_path / folder).mkdir(parents=True)
+    for name in ("engine/gpu/frame.py", "engine/extract.py", "props.py"):
+        (tmp_path / name).write_text("")
+    design = tmp_path / "docs" / "DESIGN.md"
+    design.write_text(
+        "| folder | what |\n|---|---|\n"
+        "| `engine/gpu/` | the frame (`frame.py`), the lighting (`lighting.py`) |\n"
+        "| `props.py`, `engine/` | properties (`props.py`), extraction (`extract.py`), gone (`gone.py`) |\n"
+        "\n    depsgraph --engine/extract.py--> snapshot (engine/snapshot.py), docs/formats.md\n"
+        "A bare name in prose (`frame.py`) exists somewhere, this one (`nowhere.py`) nowhere;\n"
+        "URL-like words are no paths: https://example.org/a.html, engine/gpu/frame.pyc.\n")
+    assert check.missing_design_paths(tmp_path, design) == [
+        (3, "lighting.py"), (4, "gone.py"), (6, "engine/snapshot.py"), (6, "docs/formats.md"), (7, "nowhere.py")]

@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 
 from phrt import compat
-from phrt.engine import extract, final
+from phrt.engine import extract, session
 from phrt.phrt_addon.report import metrics
 from exr_passes import read_passes
 
@@ -36,7 +36,7 @@ def save_moving_showcase(path: Path, width: int, height: int) -> Path:
 
 def assert_finite_logs():
     """No NaN or Inf in the last frame's statistics or selection rows."""
-    frame = final.last_frame()
+    frame = session.last_frame()
     for key, value in frame.stats.items():
         if isinstance(value, float):
             assert math.isfinite(value), f"stats[{key}] = {value}"
@@ -63,7 +63,7 @@ def render(scene, mode, name, tmp_path):
     for pass_name, pixels in passes.items():
         bad = ~np.isfinite(pixels)
         assert not np.any(bad), f"{name} {mode}: {bad.sum()} NaN/Inf values in pass {pass_name}"
-    assert final.last_frame().stats["mode"] == mode
+    assert session.last_frame().stats["mode"] == mode
     assert_finite_logs()
     keep = os.environ.get("PHRT_TEST_IMAGES")
     if keep:
@@ -83,7 +83,7 @@ def set_world(scene, color):
 
 
 def selected_elements():
-    return {row["element"] for row in final.last_frame().rows if row["selected"]}
+    return {row["element"] for row in session.last_frame().rows if row["selected"]}
 
 
 def camera_rays():

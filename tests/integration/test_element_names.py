@@ -10,7 +10,7 @@ import pytest  # noqa: E402
 
 bpy = pytest.importorskip("bpy")
 
-from phrt.engine import final  # noqa: E402
+from phrt.engine import session  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 from phrt_render import render  # noqa: E402
 
@@ -29,6 +29,6 @@ def test_an_object_named_wall_slash_glass_and_walls_glass_material_are_two_eleme
     slashed = showcase.mesh_object("Door/Pane", showcase.cube(0.3), brick, location=(-0.6, 0.2, 0.3))
     slashed.phrt.candidate = True
     render(scene, "HYBRID", "names", tmp_path)
-    names = [row["element"] for row in final.last_frame().rows]
+    names = [row["element"] for row in session.last_frame().rows]
     assert len(names) == len(set(names))
     assert "Door/Pane" in names and "Door\\/Pane" in names  # the Wall/Glass case

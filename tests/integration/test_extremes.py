@@ -18,7 +18,7 @@ bpy = pytest.importorskip("bpy")
 
 import bmesh  # noqa: E402
 
-from phrt.engine import final  # noqa: E402
+from phrt.engine import final, session  # noqa: E402
 from phrt.engine.runs import replay  # noqa: E402
 from phrt.phrt_addon.scene import rules  # noqa: E402
 from phrt.phrt_addon.runs import run_files
@@ -36,7 +36,7 @@ def fresh(blender):
 
 
 def rows_by_element():
-    return {row["element"]: row for row in final.last_frame().rows}
+    return {row["element"]: row for row in session.last_frame().rows}
 
 
 def small_scene(world=(0.05, 0.06, 0.08)):
@@ -225,7 +225,7 @@ def test_clear_glass_sphere_vanishes_in_a_uniform_world_even_at_its_rim(max_boun
         assert on_ball.sum() > 0.3 * on_ball.size
         np.testing.assert_allclose(passes["Combined"][..., :3], np.broadcast_to(world, (HEIGHT, WIDTH, 3)),
                                    rtol=2e-4, atol=1e-5)
-    assert final.last_frame().stats["refraction_rays"] > 0
+    assert session.last_frame().stats["refraction_rays"] > 0
 
 
 @pytest.mark.parametrize("elevation_degrees", [0.1, 1.0])
@@ -285,7 +285,7 @@ def render_modes(scene, name, tmp_path, modes=("RASTER", "RAYTRACE")):
 
 def test_no_lights_and_zero_strength_lights_give_the_same_frame(tmp_path):
     none = render_modes(lights_scene(lambda scene: None), "no-lights", tmp_path)
-    assert final.last_frame().stats["shadow_rays"] == 0
+    assert session.last_frame().stats["shadow_rays"] == 0
     final.release_caches()
 
     def zero(scene):

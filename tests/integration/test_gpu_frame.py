@@ -127,12 +127,12 @@ def render_frames(scene, frames, mode="RASTER"):
     scene.phrt.mode = mode
     counts = [dict(session.current().resources.created, upload=session.current().resources.uploads)]
     stats = []
-    with final.ReplaySession():
+    with final.ReplayState():
         for change in frames:
             change()
             bpy.ops.render.render()
             counts.append(dict(session.current().resources.created, upload=session.current().resources.uploads))
-            stats.append(dict(final.last_frame().stats))
+            stats.append(dict(session.last_frame().stats))
     return counts, stats
 
 
@@ -385,7 +385,7 @@ def test_numpys_blas_runs_one_thread_while_phrt_renders_and_gets_its_threads_bac
     scene = showcase.build_showcase(WIDTH, HEIGHT)
     before = blas.thread_counts()
     seen = []
-    with final.ReplaySession(on_frame=lambda result, snapshot: seen.append(blas.thread_counts())):
+    with final.ReplayState(on_frame=lambda result, snapshot: seen.append(blas.thread_counts())):
         bpy.ops.render.render()
         bpy.ops.render.render()
         assert blas.thread_counts() == [1] * len(before)  # between a replay's frames too

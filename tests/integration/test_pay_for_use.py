@@ -14,8 +14,8 @@ RASTER_SCRIPT = textwrap.dedent("""
     scene.phrt.mode = "RASTER"
     bpy.ops.render.render()
     bpy.ops.render.render()
-    from phrt.engine import final
-    stats = final.last_frame().stats
+    from phrt.engine import session
+    stats = session.last_frame().stats
     assert stats["n_selected"] == 0 and stats["rays"] == 0, stats
     print("EMBREEX-IMPORTED" if "embreex" in sys.modules else "EMBREEX-NOT-IMPORTED")
 """)
@@ -30,7 +30,7 @@ def test_raster_mode_never_imports_embree(tmp_path):
 
 
 def test_no_candidates_means_no_trace_work(blender):
-    from phrt.engine import final
+    from phrt.engine import session
     from phrt.sample_scenes import showcase
     scene = showcase.build_showcase(96, 72)
     for obj in scene.objects:
@@ -38,24 +38,24 @@ def test_no_candidates_means_no_trace_work(blender):
             obj.phrt.candidate = False
     scene.phrt.mode = "RAYTRACE"
     blender.ops.render.render()
-    stats = final.last_frame().stats
+    stats = session.last_frame().stats
     assert stats["n_candidates"] == 0
     assert stats["rays"] == 0 and stats["upload_ms"] == 0.0
     # Counted, not timed: no ray, no upload, and no Embree scene was ever built for this scene.
     from phrt.engine import session
     assert session.current().renderers.get(scene.name).trace_stage.trace_scene is None
-    assert all(row["reason"] == "not_candidate" for row in final.last_frame().rows)
+    assert all(row["reason"] == "not_candidate" for row in session.last_frame().rows)
 
 
 def test_no_lights_means_no_shadow_work(blender):
-    from phrt.engine import final
+    from phrt.engine import session
     from phrt.sample_scenes import showcase
     scene = showcase.build_showcase(96, 72)
     for obj in [o for o in scene.objects if o.type == "LIGHT"]:
         blender.data.objects.remove(obj)
     scene.phrt.mode = "RAYTRACE"
     blender.ops.render.render()
-    stats = final.last_frame().stats
+    stats = session.last_frame().stats
     assert stats["n_selected"] > 0, "candidates are still traced (reflections, refractions)"
     assert stats["shadow_rays"] == 0
     assert stats["reflection_rays"] > 0

@@ -18,7 +18,7 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 
 from phrt import compat  # noqa: E402
-from phrt.engine import extract, final  # noqa: E402
+from phrt.engine import extract, final, session  # noqa: E402
 from phrt.phrt_addon.report import metrics  # noqa: E402
 from phrt.phrt_addon.scene import shading  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
@@ -83,7 +83,7 @@ def camera_rays(scene):
 
 
 def selected_elements():
-    return {row["element"] for row in final.last_frame().rows if row["selected"]}
+    return {row["element"] for row in session.last_frame().rows if row["selected"]}
 
 
 # -- analytic geometry (numpy, whole images) ------------------------------------------------------------
@@ -152,7 +152,7 @@ def test_mirror_sphere_reflects_the_red_cube_where_the_mirror_rays_say(tmp_path)
     for mode in ("RAYTRACE", "RASTER"):
         red = red_dominant(render(scene, mode, "mirror", tmp_path)["Combined"][..., :3])
         results[mode] = (red[sure_red].mean(), red[sure_not_red].mean())
-    assert final.last_frame().stats["n_selected"] == 0
+    assert session.last_frame().stats["n_selected"] == 0
     assert results["RAYTRACE"][0] > 0.97, results
     assert results["RAYTRACE"][1] < 0.01, results
     assert results["RASTER"][0] < 0.01, results  # raster reflects the world colour only
@@ -432,7 +432,7 @@ def test_elements_touching_the_camera_render_finite_frames(tmp_path):
     showcase.add_camera(camera_location, (0.0, 0.0, 0.5))
     for mode in MODES:
         passes = render(scene, mode, "touching", tmp_path)
-        assert final.last_frame().stats["mode"] == mode
+        assert session.last_frame().stats["mode"] == mode
         assert passes["Combined"][..., :3].max() > 0
 
 
@@ -480,7 +480,7 @@ def test_every_pass_is_finite_in_every_mode(name, tmp_path):
     scene = SCENES[name]()
     for mode in MODES:
         render(scene, mode, f"finite-{name}", tmp_path)  # render() asserts every value of every pass is finite
-        assert final.last_frame().stats["mode"] == mode
+        assert session.last_frame().stats["mode"] == mode
 
 
 def test_a_new_file_far_away_renders_like_the_first(tmp_path):

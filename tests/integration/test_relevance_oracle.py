@@ -62,7 +62,7 @@ def render_frames(count):
     frames = []
     for _ in range(count):
         bpy.ops.render.render()
-        frames.append({row["element"]: row for row in final.last_frame().rows})
+        frames.append({row["element"]: row for row in session.last_frame().rows})
     return frames
 
 

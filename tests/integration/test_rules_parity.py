@@ -21,7 +21,7 @@ bpy = pytest.importorskip("bpy")
 
 import bmesh  # noqa: E402
 
-from phrt.engine import final  # noqa: E402
+from phrt.engine import final, session  # noqa: E402
 from phrt.phrt_addon.scene import rules  # noqa: E402
 from phrt.sample_scenes import showcase  # noqa: E402
 from phrt_render import box_hit, camera_rays, erode, plane_hit, render, selected_elements, set_world  # noqa: E402
@@ -190,7 +190,7 @@ def test_k_zero_is_neither_selected_nor_marked_as_candidate(tmp_path):
     scene.phrt.shadow_map_size = 256
     bpy.data.objects["MirrorSphere"].phrt.priority = 0.0
     passes = render(scene, "RAYTRACE", "k-zero", tmp_path)
-    rows = {row["element"]: row for row in final.last_frame().rows}
+    rows = {row["element"]: row for row in session.last_frame().rows}
     assert rows["MirrorSphere"]["reason"] == "not_candidate" and not rows["MirrorSphere"]["selected"]
     assert rows["GlassSlab"]["selected"]
     sphere = passes["PHRT Selected"] < 0.5
@@ -205,7 +205,7 @@ def test_k_zero_is_neither_selected_nor_marked_as_candidate(tmp_path):
     assert np.all(sphere[hits_sphere])
     glass = passes["PHRT Selected"] > 0.5
     assert np.all(passes["PHRT Candidate"][glass] == 1.0)
-    assert final.last_frame().stats["n_candidates"] == 2  # glass slab and fence
+    assert session.last_frame().stats["n_candidates"] == 2  # glass slab and fence
 
 
 def mirror_and_glass_scene(max_bounces):
@@ -235,7 +235,7 @@ def test_max_bounces_zero_traces_no_bounce(tmp_path):
     raster = render(scene, "RASTER", "bounces-0", tmp_path)["Combined"]
     traced = render(scene, "RAYTRACE", "bounces-0", tmp_path)
     assert selected_elements() == {"Mirror", "Block"}
-    assert final.last_frame().stats["reflection_rays"] == 0 and final.last_frame().stats["refraction_rays"] == 0
+    assert session.last_frame().stats["reflection_rays"] == 0 and session.last_frame().stats["refraction_rays"] == 0
     np.testing.assert_array_equal(traced["Combined"], raster)
 
 
@@ -245,7 +245,7 @@ def test_one_bounce_and_more_see_the_floor_through_closed_glass(max_bounces, tmp
     side, so the light goes straight on to the floor (never the blue world colour)."""
     scene = mirror_and_glass_scene(max_bounces)
     traced = render(scene, "RAYTRACE", f"bounces-{max_bounces}", tmp_path)
-    stats = final.last_frame().stats
+    stats = session.last_frame().stats
     assert stats["reflection_rays"] > 0 and stats["refraction_rays"] > 0
     selected = traced["PHRT Selected"] > 0.5
     block = selected.copy()

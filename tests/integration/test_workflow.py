@@ -20,7 +20,7 @@ import pytest  # noqa: E402
 import phrt  # noqa: E402
 from phrt import compat  # noqa: E402
 from phrt.engine import final, session, viewport  # noqa: E402
-from phrt.engine.runs import replay  # noqa: E402
+from phrt.engine.runs import camera_path, replay  # noqa: E402
 from phrt.phrt_addon import schema
 from phrt.phrt_addon.runs import run_files
 from phrt.sample_scenes.showcase import build_showcase  # noqa: E402
@@ -42,7 +42,7 @@ def scene():
     """The showcase at 160x120 with its camera keyframed over frames 1-30."""
     scene = build_showcase(WIDTH, HEIGHT)
     animate_camera(scene.camera, PATH_FRAMES)
-    final.last_frame().clear()
+    session.last_frame().clear()
     return scene
 
 
@@ -80,7 +80,7 @@ def rgb(channels):
 
 
 def row_of(element, rows=None):
-    rows = final.last_frame().rows if rows is None else rows
+    rows = session.last_frame().rows if rows is None else rows
     return next(row for row in rows if row["element"] == element)
 
 
@@ -281,7 +281,7 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     mirror = bpy.data.objects["MirrorSphere"]
     bpy.context.view_layer.objects.active = mirror
     mirror.select_set(True)
-    final.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
+    session.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
     for panel in view3d.PANELS:
         assert hasattr(bpy.types, panel.__name__), f"{panel.__name__} is not registered"
         assert panel.bl_category == "PHRT" and panel.bl_space_type == "VIEW_3D" and panel.bl_region_type == "UI"
@@ -313,7 +313,7 @@ def test_panels_register_poll_on_the_engine_and_draw(scene):
     assert ("label", "Object 'Broken' skipped: no geometry") not in logs["PHRT_PT_last_render"]  # a new frame
     assert ("label", "No problems") in logs["PHRT_PT_last_render"]
 
-    final.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
+    session.last_frame().problems = ["Object 'Broken' skipped: no geometry"]
     assert ("label", "Object 'Broken' skipped: no geometry") in draw_panel(view3d.PHRT_PT_last_render, context)
 
     from phrt.panels import candidates
@@ -405,6 +405,7 @@ def check_run(run_dir, frames, mode, images="exr"):
         assert row["n_selected"] == sum(bool(s["selected"]) for s in rows)
         assert row["n_candidates"] == sum(s["reason"] != "not_candidate" for s in rows)
         assert row["n_visible"] == sum(bool(s["visible"]) for s in rows)
+        assert row["lighting_ms"] == row["composite_ms"]  # docs/formats.md: the column's first name
         for s in rows:
             assert (s["reason"] == "") == bool(s["selected"])
             assert s["reason"] in ("",) + schema.REASONS
@@ -464,6 +465,23 @@ def test_replay_operator_rejects_bad_input_and_writes_nothing(scene, tmp_path, a
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("arguments, message", [
+    ({"mode": "pathtrace"}, "unknown mode 'pathtrace'"),
+    ({"images": "tiff"}, "unknown image format 'tiff'"),
+    ({"budget_ms": -1.0}, "budget -1 ms is not >= 0"),
+    ({"budget_ms": float("nan")}, "budget nan ms is not >= 0"),
+    ({"budget_at": 1.5}, "--budget-at 1.5 is outside 0..1"),
+    ({"frame_range": (9, 3)}, "frame range 9-3 ends before it starts"),
+])
+def test_a_replay_refuses_bad_arguments_as_the_command_does_and_writes_nothing(scene, tmp_path, arguments, message):
+    """replay.check_input is the one check of a replay's arguments: the Python entry point refuses
+    them with the messages ``phrt render`` prints."""
+    given = {"mode": "RASTER", "frame_range": (1, 2), **arguments}
+    with pytest.raises(camera_path.ReplayError, match=message):
+        replay.replay(scene, scene.camera, given.pop("frame_range"), given.pop("mode"), tmp_path / "out", **given)
+    assert not (tmp_path / "out").exists()
+
+
 def test_replay_operator_rejects_an_output_folder_under_a_file(scene, tmp_path):
     blocker = tmp_path / "somefile"
     blocker.write_text("")
@@ -493,13 +511,12 @@ def test_cancelled_replay_keeps_complete_frames_and_logs(scene, tmp_path):
 
 def test_stepped_replay_cancelled_by_esc_keeps_what_was_rendered(scene, tmp_path):
     """The modal operator's path: one frame per timer tick, Esc -> finish(cancelled=True)."""
-    from phrt.operators.replay_path import SteppedReplay
     filepath = scene.render.filepath
-    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "HYBRID", tmp_path / "run", scene_label="showcase")
+    run = replay.ReplayRun(scene, scene.camera, (1, PATH_FRAMES), "HYBRID", tmp_path / "run", scene_label="showcase")
     for _ in range(3):
         run.step()
     assert run.remaining == PATH_FRAMES - 3
-    assert final.active_replay() is run.session  # between ticks the session stays active
+    assert final.active_replay() is run.state  # between ticks the replay's state stays active
     result = run.finish(cancelled=True)
     assert result.cancelled and result.frames_done == 3 and final.active_replay() is None
     _, _, summary = check_run(tmp_path / "run", [1, 2, 3], "HYBRID")
@@ -511,12 +528,11 @@ def test_stepped_replay_stopped_during_a_render_drops_that_frame(scene, tmp_path
     """Esc while a frame renders: the engine returns without a result (test_break); the
     frame's rows are dropped, the frames before it stay complete.  (Without images: an
     engine that writes no result and write_still=True crashes Blender 5.0.1 in background.)"""
-    from phrt.operators.replay_path import ReplayInterrupted, SteppedReplay
-    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
+    run = replay.ReplayRun(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
     run.step()
     run.step()
     monkeypatch.setattr(final.FinalRender, "render", lambda self, depsgraph: None)
-    with pytest.raises(ReplayInterrupted):
+    with pytest.raises(replay.ReplayInterrupted):
         run.step()
     assert run.done == 2
     run.finish(cancelled=True)
@@ -525,8 +541,7 @@ def test_stepped_replay_stopped_during_a_render_drops_that_frame(scene, tmp_path
 
 
 def test_stepped_replay_closed_by_blender_leaves_the_scene_alone(scene, tmp_path):
-    from phrt.operators.replay_path import SteppedReplay
-    run = SteppedReplay(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
+    run = replay.ReplayRun(scene, scene.camera, (1, PATH_FRAMES), "RASTER", tmp_path / "run", images="none")
     run.step()
     run.finish(cancelled=True, restore_scene=False)
     assert scene.render.engine == "PHRT" and scene.frame_current == 1  # as the replay left it
@@ -534,9 +549,8 @@ def test_stepped_replay_closed_by_blender_leaves_the_scene_alone(scene, tmp_path
 
 
 def test_stepped_replay_writes_what_replay_writes(scene, tmp_path):
-    from phrt.operators.replay_path import SteppedReplay
     replay.replay(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "blocking", images="none")
-    run = SteppedReplay(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "stepped", images="none")
+    run = replay.ReplayRun(scene, scene.camera, (5, 7), "RAYTRACE", tmp_path / "stepped", images="none")
     while run.remaining:
         run.step()
     run.finish()
@@ -559,7 +573,7 @@ def test_export_selection_log_round_trips_csv_and_json(scene, tmp_path):
     with pytest.raises(RuntimeError, match="render a frame with PHRT first"):
         bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "empty.csv"))
     bpy.ops.render.render()
-    rows = final.last_frame().rows
+    rows = session.last_frame().rows
     assert bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "log.csv")) == {"FINISHED"}
     assert bpy.ops.phrt.export_selection_log(filepath=str(tmp_path / "log.JSON")) == {"FINISHED"}
 
@@ -619,7 +633,7 @@ def test_overlay_colors_follow_the_last_decisions():
 def test_overlay_boxes_surround_the_candidates_of_the_last_frame(scene):
     bpy.data.materials["Red"].phrt.candidate = True
     bpy.ops.render.render()
-    colors = viewport.overlay_colors(final.last_frame().rows)
+    colors = viewport.overlay_colors(session.last_frame().rows)
     assert set(colors) == {"MirrorSphere", "GlassSlab", "Fence", "RedCube/Red"}
     boxes = viewport.overlay_boxes(bpy.context.evaluated_depsgraph_get(), colors)
     assert len(boxes) == 4
