@@ -301,8 +301,22 @@ def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, execut
 
 
 def main(argv=None):
+    """The ``phrt`` program (``argv`` None: ``sys.argv``, and the process ends here once Blender
+    was loaded, see blender_process.end_program) or a call from Python (returns the exit code)."""
     as_program = argv is None  # the `phrt` program itself: its stdout ends with its last line
     argv = sys.argv[1:] if argv is None else argv
+    try:
+        code = _run(argv)
+    except BaseException:
+        if as_program and "bpy" in sys.modules:
+            blender_process.quiet_exit()
+        raise
+    if as_program and "bpy" in sys.modules:
+        blender_process.end_program(code or 0)
+    return code
+
+
+def _run(argv) -> int:
     try:
         args = build_parser().parse_args(argv)
         if args.command not in ("report", "rescore"):  # every other command runs Blender
@@ -314,9 +328,6 @@ def main(argv=None):
     except UserError as error:
         print(f"phrt: error: {error}", file=sys.stderr)
         return 2
-    finally:
-        if as_program and "bpy" in sys.modules:
-            blender_process.quiet_exit()
 
 
 if __name__ == "__main__":

@@ -142,6 +142,17 @@ def load_scene(name_or_path):
     return path.stem
 
 
+def end_program(code: int):
+    """End the ``phrt`` program with ``code`` once its output is flushed, without the C++
+    static destructors of Blender's module: bpy 4.5's task scheduler waits forever in one
+    (``GlobalState::~GlobalState``, in ``pthread_cond_destroy``) after a file's scripted
+    driver was evaluated, and 4.5 and 5.0 print 'Not freed memory blocks' there.  Everything
+    PHRT writes is closed before this (run folders are written atomically and unlocked)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(int(code))
+
+
 def quiet_exit():
     """Nothing Blender prints on stdout while the process ends reaches it: 4.5 and 5.0
     report 'Not freed memory blocks' there after opening a file saved by a newer Blender."""

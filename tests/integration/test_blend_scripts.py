@@ -50,6 +50,8 @@ def scripted(tmp_path_factory):
 
 
 def _python(code, cwd):
+    """``code`` run by this Python in a new process (ended by os._exit for the control: bpy 4.5
+    hangs in a static destructor at exit after a scripted driver ran; ``phrt`` ends the same way)."""
     return subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=600)
 
 
@@ -58,7 +60,8 @@ def test_the_control_opened_with_scripts_allowed_runs_both(scripted, tmp_path):
     for marker in (text_marker, driver_marker):
         marker.unlink(missing_ok=True)
     done = _python(f"import bpy; bpy.ops.wm.open_mainfile(filepath={str(blend)!r}, use_scripts=True); "
-                   f"bpy.context.scene.frame_set(2); bpy.context.view_layer.update()", tmp_path)
+                   f"bpy.context.scene.frame_set(2); bpy.context.view_layer.update(); "
+                   f"import os, sys; sys.stdout.flush(); os._exit(0)", tmp_path)
     assert done.returncode == 0, done.stderr
     assert text_marker.exists() and driver_marker.exists()
 
@@ -69,8 +72,8 @@ def test_phrt_render_runs_neither_and_warns_once(scripted, tmp_path):
         marker.unlink(missing_ok=True)
     done = _python("import sys, bpy; bpy.context.preferences.filepaths.use_scripts_auto_execute = True; "
                    "from phrt.cli import main; "
-                   f"sys.exit(main(['render', {str(blend)!r}, '--frames', '1-2', '--images', 'none', "
-                   f"'--resolution', '32x24', '--out', 'run']))", tmp_path)
+                   f"sys.argv = ['phrt', 'render', {str(blend)!r}, '--frames', '1-2', '--images', 'none', "
+                   f"'--resolution', '32x24', '--out', 'run']; main()", tmp_path)
     assert done.returncode == 0, done.stderr
     assert not text_marker.exists() and not driver_marker.exists()
     warnings = [line for line in done.stderr.splitlines() if line.startswith("phrt: warning:")]
