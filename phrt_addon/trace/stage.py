@@ -58,6 +58,23 @@ def _attribute_to_pixels(element_rays, pixel_element, rays):
     _attribute(element_rays, elements, pixels, rays)
 
 
+EFFECTS = ("shadows", "reflections", "refractions")
+
+
+def traced_effects(elements, selected, effects=None) -> dict[str, np.ndarray]:
+    """Per effect, the elements whose effect is traced: selected, tagged for it, and (when
+    ``effects`` names the effect) chosen for it."""
+    selected = np.asarray(selected, bool)
+    wanted = {}
+    for effect in EFFECTS:
+        tagged = np.fromiter((bool(getattr(element, effect)) for element in elements), bool, len(elements))
+        chosen = selected & tagged
+        if effects is not None and effect in effects:
+            chosen &= np.asarray(effects[effect], bool)
+        wanted[effect] = chosen
+    return wanted
+
+
 @dataclass
 class TraceCounters:
     """Rays cast and ms spent per effect; ``upload_ms``: a static Embree build (one-time work)."""
@@ -109,13 +126,18 @@ class TraceStage:
             entry = self._textures[id(texture)] = (texture, rules.prepare_texture(texture))
         return entry[1]
 
-    def run(self, snapshot, layers, materials, selected, element_bounds) -> TraceResult:
-        """Trace the selected elements' effects from the read-back ``layers``."""
+    def run(self, snapshot, layers, materials, selected, element_bounds, effects=None) -> TraceResult:
+        """Trace the selected elements' effects from the read-back ``layers``.
+
+        ``effects`` (optional): per effect name (``shadows``, ``reflections``, ``refractions``)
+        a bool array over elements of those whose effect is traced, for selections of
+        (element, effect) items; by default every tagged effect of a selected element."""
         from .embree_scene import TraceScene
         from .tracer import RadianceTracer, leave_surface, reflection_blend
 
         counters = TraceCounters()
         element_rays = np.zeros(len(snapshot.elements))
+        wanted_effects = traced_effects(snapshot.elements, selected, effects)
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
         static_builds = self.trace_scene.stats["static_builds"]
@@ -142,7 +164,7 @@ class TraceStage:
 
         # Shadows: for each light, the pixels a selected caster can shadow get traced visibility.
         start = time.perf_counter()
-        casters = [i for i in np.flatnonzero(selected) if elements[i].shadows and element_bounds[i] is not None]
+        casters = [i for i in np.flatnonzero(wanted_effects["shadows"]) if element_bounds[i] is not None]
         for layer_name, pixels in layers.items():
             if not casters or len(pixels) == 0:
                 continue
@@ -185,7 +207,7 @@ class TraceStage:
         # Reflections on selected elements' pixels (mirror direction, blended by roughness).
         start = time.perf_counter()
         rays_before = tracer.rays + tracer.shadow_rays
-        reflecting = np.array([bool(selected[i]) and elements[i].reflections for i in range(n_elements)] + [False])
+        reflecting = np.r_[wanted_effects["reflections"], False]
         for layer_name, pixels in layers.items():
             if not bounces or len(pixels) == 0:
                 continue
@@ -210,8 +232,7 @@ class TraceStage:
         rays_before = tracer.rays + tracer.shadow_rays
         pixels = layers["transparent"]
         if bounces and len(pixels):
-            refracting = np.array([bool(selected[i]) and elements[i].refractions
-                                   for i in range(n_elements)] + [False])
+            refracting = np.r_[wanted_effects["refractions"], False]
             element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
             wanted = refracting[element_of] & (materials.transmissive[pixels.material] > rules.TRANSPARENT_EPSILON)
             idx = np.flatnonzero(wanted)
