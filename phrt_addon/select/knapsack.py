@@ -1,0 +1,115 @@
+"""0/1 knapsack of the ``BENEFIT`` selection: the items worth most within the frame's time.
+
+``solve(values, costs, capacity)`` returns the chosen items.  Costs are milliseconds; the
+capacity T is split into ``bins`` equal bins and every cost is rounded *up* to whole bins, so
+the chosen set's true cost never exceeds T (the rounding can only leave time unused: at most
+one bin per chosen item).  Up to ``EXACT_LIMIT`` useful items the dynamic programme over the
+bins is exact for the rounded costs; beyond it the items are sorted by value per ms, the
+greedy prefix is kept and a *core* of ``CORE_ITEMS`` items around the greedy's first miss is
+solved exactly with the time the prefix leaves (the classic core of Balas and Zemel: the
+items far from the break rarely change; not a proven bound).  Either way the result is
+compared with the best single item that fits (exactly, without rounding), which bounds
+the loss of the rounding on a set of few large items: the returned value is at least half
+of the optimum.
+
+Items of value <= 0, or that cannot fit alone, are never chosen; items of cost 0 and value
+> 0 always are.  Plain numpy: the programme is one vectorised row update per item.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+DEFAULT_BINS = 256
+EXACT_LIMIT = 1000
+CORE_ITEMS = 96
+MAX_BINS = 4096
+
+
+LARGE = np.finfo(np.float64).max / 4
+
+
+def _finite(values, nan: float) -> np.ndarray:
+    array = np.asarray(values, dtype=np.float64).ravel()
+    return np.nan_to_num(array, nan=nan, posinf=LARGE, neginf=0.0)
+
+
+def _dynamic_programme(values, weights, capacity_bins) -> np.ndarray:
+    """Exact 0/1 knapsack over integer ``weights`` (>= 1) within ``capacity_bins``: a mask."""
+    n = len(values)
+    best = np.zeros(capacity_bins + 1)
+    took = np.zeros((n, capacity_bins + 1), dtype=bool)
+    for index in range(n):
+        weight = int(weights[index])
+        if weight > capacity_bins:
+            continue
+        candidate = best[:capacity_bins + 1 - weight] + values[index]
+        better = candidate > best[weight:]
+        took[index, weight:] = better
+        best[weight:] = np.where(better, candidate, best[weight:])
+    chosen = np.zeros(n, dtype=bool)
+    remaining = capacity_bins
+    for index in range(n - 1, -1, -1):
+        if took[index, remaining]:
+            chosen[index] = True
+            remaining -= int(weights[index])
+    return chosen
+
+
+def bins_for(n_items: int, bins: int = DEFAULT_BINS) -> int:
+    """Bins of T for ``n_items``: at least ``bins``, and four per item (up to MAX_BINS) so that
+    many small items do not lose most of T to the rounding."""
+    return int(min(max(int(bins), 4 * int(n_items)), MAX_BINS))
+
+
+def _binned(values, costs, capacity, bins) -> np.ndarray:
+    """The exact programme over costs rounded up to bins of ``capacity``."""
+    if capacity <= 0 or len(values) == 0:
+        return np.zeros(len(values), dtype=bool)
+    n_bins = bins_for(len(values), bins)
+    width = capacity / n_bins
+    if not width > 0:  # a capacity too small to split
+        return np.zeros(len(values), dtype=bool)
+    # Rounded up (less a relative 1e-9 that float division adds to whole bins): a chosen set of
+    # rounded cost <= n_bins has true cost <= capacity.
+    with np.errstate(over="ignore", divide="ignore"):
+        in_bins = np.minimum(costs / width, n_bins + 1.0)
+    weights = np.maximum(np.ceil(in_bins * (1.0 - 1e-9)), 1).astype(np.int64)
+    return _dynamic_programme(values, weights, n_bins)
+
+
+def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
+    """The items (bool mask) of the largest summed value whose summed cost is <= ``capacity``."""
+    values = _finite(values, nan=0.0)
+    costs = _finite(costs, nan=LARGE)  # an unknown cost never fits
+    if values.shape != costs.shape:
+        raise ValueError(f"values and costs differ in shape: {values.shape} vs {costs.shape}")
+    costs = np.maximum(costs, 0.0)
+    capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=np.finfo(np.float64).max / 4))
+    chosen = np.zeros(len(values), dtype=bool)
+    if capacity < 0 or len(values) == 0:
+        return chosen
+    free = (costs == 0) & (values > 0)
+    chosen |= free
+    useful = np.flatnonzero((values > 0) & (costs > 0) & (costs <= capacity))
+    if len(useful) == 0 or capacity <= 0:
+        return chosen
+    picked = np.zeros(len(useful), dtype=bool)
+    if len(useful) <= EXACT_LIMIT:
+        picked = _binned(values[useful], costs[useful], capacity, bins)
+    else:
+        # The ratio greedy's prefix (true costs) up to a core around its first miss, then the core.
+        order = np.lexsort((useful, -(values[useful] / costs[useful])))
+        prefix = int(np.searchsorted(np.cumsum(costs[useful][order]), capacity, side="right"))
+        start = max(prefix - CORE_ITEMS // 2, 0)
+        core = order[start:start + CORE_ITEMS]
+        fixed = order[:start]
+        picked[fixed] = True
+        left = capacity - float(np.sum(costs[useful][fixed]))
+        picked[core] = _binned(values[useful][core], costs[useful][core], left, bins)
+    fits_alone = useful[costs[useful] <= capacity]
+    single = fits_alone[np.argmax(values[fits_alone])]
+    if values[single] > float(np.sum(values[useful][picked])):
+        chosen[single] = True
+    else:
+        chosen[useful[picked]] = True
+    return chosen
