@@ -134,6 +134,13 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
                     "on this machine",
         default=defaults.BUDGET_AT, min=0.0, max=1.0, subtype="FACTOR",
     )
+    selection: EnumProperty(
+        name="Selection",
+        description="How the hybrid frame chooses what to ray trace: the paper's heuristic, or (element, "
+                    "effect) items bought for the most error removed per millisecond",
+        items=_enum_items(schema.SELECTION_ITEMS),
+        default="PAPER",
+    )
     relevance: EnumProperty(
         name="Relevance",
         description="What the heuristic's relevance R weighs: the paper's visibility, or visibility times "

@@ -173,7 +173,8 @@ def read_settings(scene) -> Settings:
                     max_area_fraction=float(props.max_area_fraction), max_bounces=int(props.max_bounces),
                     cost_mode=props.cost_mode, shadow_map_size=int(props.shadow_map_size),
                     budget_at=float(props.budget_at) if props.use_budget_at else None,
-                    relevance=props.relevance, selection_order=props.selection_order)
+                    relevance=props.relevance, selection_order=props.selection_order,
+                    selection=getattr(props, "selection", "PAPER"))
 
 
 def resolution(scene):

@@ -1,5 +1,5 @@
 """Properties > Render with PHRT as the engine: the scene's renderer settings (``Scene.phrt``:
-mode, budget with the frame rate it means, I, relevance, greedy order, max area, bounces,
+mode, budget with the frame rate it means, selection (and the paper's I, relevance and greedy order), max area, bounces,
 cost model, shadow map size).  docs/properties.md says what each does."""
 
 import bpy
@@ -39,9 +39,12 @@ class PHRT_PT_render(bpy.types.Panel):
             row = column.row(align=True)
             row.prop(settings, "budget_ms", text="Budget (ms)")
             row.label(text=frame_rate_text(settings.budget_ms))
-        column.prop(settings, "selection_weight", text="Selection Weight I")
-        column.prop(settings, "relevance")
-        column.prop(settings, "selection_order")
+        column.prop(settings, "selection")
+        paper = column.column()
+        paper.active = settings.selection == "PAPER"  # the paper's knobs; BENEFIT has its own terms
+        paper.prop(settings, "selection_weight", text="Selection Weight I")
+        paper.prop(settings, "relevance")
+        paper.prop(settings, "selection_order")
         column.prop(settings, "max_area_fraction", text="Max Area (of frame)")
         column.prop(settings, "max_bounces")
         column.prop(settings, "cost_mode")

@@ -31,7 +31,9 @@ import time
 
 import numpy as np
 
-from .select import benefit, heuristic
+from dataclasses import replace as dataclass_replace
+
+from .select import benefit, benefit_selection, heuristic, item_benefit
 from .select import selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
@@ -67,6 +69,8 @@ class FrameRenderer:
         self.element_bounds = ElementBounds()
         # The error-aware relevance's per-element estimates (phrt_addon/select/benefit.py).
         self.benefit_model = benefit.BenefitModel()
+        # The BENEFIT selection's per-item estimates and margin (phrt_addon/select/benefit_selection.py).
+        self.benefit_selector = benefit_selection.BenefitSelector()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
@@ -97,14 +101,16 @@ class FrameRenderer:
         layers = None
         readback_ms = 0.0
         may_trace = mode != "RASTER" and bool(np.any(candidate & (area_px > 0)))
-        learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR"
+        use_benefit = may_trace and mode == "HYBRID" and str(settings.selection).upper() == "BENEFIT"
+        learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR" \
+            and not use_benefit
 
         def read_layers():
             gbuffer = raster.gbuffer()
             return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
                     "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
 
-        if learn_benefit:  # the benefit prior reads the materials under each element's pixels
+        if learn_benefit or use_benefit:  # the benefit priors read the materials under each element's pixels
             start = _timer()
             layers = read_layers()
             readback_ms = _ms(start)
@@ -118,6 +124,7 @@ class FrameRenderer:
             if shadow_lights and may_trace else np.zeros(n_elements)
         flags = {effect: np.array([getattr(e, effect) for e in snapshot.elements], bool)
                  for effect in ("shadows", "reflections", "refractions")}
+        effect_rays = _effect_rays_per_pixel(snapshot, area_px, footprint)
         expected_benefit = self.benefit_model.benefit(
             [e.name for e in snapshot.elements],
             benefit.prior_per_pixel(layers, n_elements, flags["reflections"], flags["refractions"],
@@ -129,7 +136,7 @@ class FrameRenderer:
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
             shadows=flags["shadows"], reflections=flags["reflections"], refractions=flags["refractions"],
-            rays_per_pixel=_rays_per_pixel(snapshot, area_px, footprint),
+            rays_per_pixel=np.sum(effect_rays * _flags_array(flags), axis=1),
             frame_px=raster.width * raster.height,
             near_clip=snapshot.camera.clip_start,
             benefit=expected_benefit,
@@ -143,6 +150,11 @@ class FrameRenderer:
             self.cost_model, frame=snapshot.frame,
             # The time left is measured after this frame's raster half, not predicted for it.
             raster_ms=max(raster_ms - raster.setup_ms, 0.0))
+        choice = item_priors = None
+        if use_benefit and self.forced_selection is None:
+            item_priors = item_benefit.priors(layers, n_elements, flags, materials)
+            choice, selection = self._choose_items(selection, frame_elements, item_priors, area_px, footprint,
+                                                   effect_rays)
         if self.forced_selection is not None:
             selection = heuristic.force_selection(selection, self.forced_selection)
         selected = np.asarray(selection.selected, bool)
@@ -156,13 +168,14 @@ class FrameRenderer:
                 begin = _timer()
                 layers = read_layers()
                 readback_ms = _ms(begin)
-            traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds)
+            traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
+                                                effects=selection.effects)
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
 
         # -- lighting and composite (GPU) -----------------------------------------
         start = _timer()
-        measure = learn_benefit and traced is not None
+        measure = (learn_benefit or choice is not None) and traced is not None
         combined = raster.shade(traced, measure_change=measure)
         composite_ms = _ms(start)
         # Uploading the traced results is part of the tracing's cost, which scales with the selection.
@@ -173,7 +186,17 @@ class FrameRenderer:
         shade_setup_ms = float(raster.stats.get("shade_setup_ms", 0.0))
         passes = self._passes(snapshot, raster, combined, selected, candidate)
 
-        if measure:
+        if choice is not None:
+            start = _timer()
+            pixels = item_benefit.item_pixels(area_px, footprint)
+            measured = item_benefit.measure(snapshot, layers, raster.traced_change(), traced, choice.chosen,
+                                            element_bounds) if measure else None
+            self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
+            if traced is not None:
+                self.benefit_selector.observe_time(selection.predicted_trace_ms,
+                                                   max(trace_ms - counters.upload_ms, 0.0))
+            select_ms += _ms(start)
+        elif measure:
             # The error-aware relevance learns what tracing changed, measured on the GPU beside the
             # image (selection bookkeeping: select_ms).
             start = _timer()
@@ -216,6 +239,38 @@ class FrameRenderer:
                            selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
 
     # ------------------------------------------------------------------
+    def _choose_items(self, selection, frame_elements, priors, area_px, footprint, effect_rays):
+        """The BENEFIT selection of this frame: (ItemChoice, the SelectionResult it becomes).  The
+        result keeps the paper's terms for the log; its elements' effect flags and rays per pixel
+        are those traced, which the cost model learns from."""
+        terms = selection.terms
+        flags = _flags_array({"shadows": frame_elements.shadows, "reflections": frame_elements.reflections,
+                              "refractions": frame_elements.refractions}).astype(bool)
+        competing = terms.candidate & terms.visible & terms.within_area
+        pixels = item_benefit.item_pixels(area_px, footprint)
+        eligible = flags & competing[:, None] & (pixels > 0)
+        state = self.cost_model.state()
+        ms_per_ray = [state[f"{effect}_ms_per_ray"] for effect in ("shadows", "reflections", "refractions")]
+        overhead = self.cost_model.trace_overhead_ms()
+        choice = self.benefit_selector.choose(
+            frame_elements.names, eligible, pixels, priors, frame_elements.priority, frame_elements.rt_cost,
+            effect_rays * np.asarray(area_px, np.float64)[:, None], ms_per_ray, state["measured_residual"],
+            selection.time_left_ms, overhead)
+        chosen = choice.chosen
+        selected = chosen.any(axis=1)
+        forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)
+                                                       if flag])
+        traced_flags = np.where(selected[:, None], chosen, flags)
+        as_traced = dataclass_replace(
+            frame_elements, shadows=traced_flags[:, 0], reflections=traced_flags[:, 1],
+            refractions=traced_flags[:, 2], rays_per_pixel=np.sum(effect_rays * traced_flags, axis=1))
+        predicted = np.where(selected, np.sum(np.where(chosen, choice.cost_ms, 0.0), axis=1),
+                             np.sum(choice.cost_ms, axis=1))
+        trace = float(np.sum(choice.cost_ms[chosen])) + (overhead if np.any(selected) else 0.0)
+        return choice, dataclass_replace(
+            forced, elements=as_traced, predicted_ms=predicted, predicted_trace_ms=trace,
+            effects=choice.effects, benefit_estimate=np.sum(choice.value, axis=1))
+
     @staticmethod
     def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
         front = np.asarray(raster.front_element)
@@ -297,17 +352,14 @@ def clamp_finite(array: np.ndarray) -> np.ndarray:
     return array if np.isfinite(array).all() else np.nan_to_num(array)
 
 
-def _rays_per_pixel(snapshot, area_px, footprint):
-    """Rays one pixel of each element costs with its effects (input of the measured cost model)."""
-    rays = np.zeros(len(snapshot.elements))
-    safe_area = np.maximum(area_px, 1)
-    for index, element in enumerate(snapshot.elements):
-        per_pixel = 0.0
-        if element.shadows:
-            per_pixel += footprint[index] / safe_area[index]
-        if element.reflections:
-            per_pixel += 1.0 + len(snapshot.lights)  # the reflection ray and its hit's shadow rays
-        if element.refractions:
-            per_pixel += 2.0 + len(snapshot.lights)  # in, out, and the hit's shadow rays
-        rays[index] = per_pixel
-    return rays
+def _effect_rays_per_pixel(snapshot, area_px, footprint) -> np.ndarray:
+    """(n, 3) rays one pixel of each element costs per effect (shadows, reflections, refractions),
+    whether or not it is tagged for it (input of the measured cost model)."""
+    n_lights = len(snapshot.lights)
+    shadows = np.asarray(footprint, np.float64) / np.maximum(np.asarray(area_px, np.float64), 1.0)
+    return np.stack([shadows, np.full(len(shadows), 1.0 + n_lights),  # the reflection ray and its hit's shadow rays
+                     np.full(len(shadows), 2.0 + n_lights)], axis=1)  # in, out, and the hit's shadow rays
+
+
+def _flags_array(flags) -> np.ndarray:
+    return np.stack([flags["shadows"], flags["reflections"], flags["refractions"]], axis=1).astype(np.float64)

@@ -33,6 +33,11 @@ RELEVANCE_ITEMS = (
     ("ERROR", "Error-Aware", "V weighted by a running estimate of the element's traced-vs-raster "
                              "difference per pixel (a prior from its material before it is traced)"),
 )
+SELECTION_ITEMS = (
+    ("PAPER", "Paper", "The paper's heuristic: the most relevant elements whose cost fits the time left"),
+    ("BENEFIT", "Benefit per ms", "(element, effect) items valued by the error they remove, learned per item, "
+                                  "chosen by an exact knapsack within the time left, with a switching cost"),
+)
 ORDER_ITEMS = (
     ("RELEVANCE", "Relevance", "The paper's: the most relevant element first"),
     ("RELEVANCE_PER_MS", "Relevance per ms", "Relevance divided by the predicted milliseconds first"),
@@ -40,6 +45,7 @@ ORDER_ITEMS = (
 COST_MODES = tuple(item[0].lower() for item in COST_MODE_ITEMS)
 RELEVANCES = tuple(item[0].lower() for item in RELEVANCE_ITEMS)
 ORDERS = tuple(item[0].lower() for item in ORDER_ITEMS)
+SELECTIONS = tuple(item[0].lower() for item in SELECTION_ITEMS)
 
 # -- ray traced effects an element may get ---------------------------------------------
 EFFECTS = ("shadows", "reflections", "refractions")
@@ -85,5 +91,5 @@ SELECTION_COLUMNS = (
 )
 # Why an element was not ray traced; empty when it was selected.
 REASONS = ("not_visible", "over_area", "over_budget", "not_candidate")
-STRING_COLUMNS = frozenset({"mode", "element", "reason"})
+STRING_COLUMNS = frozenset({"mode", "element", "reason", "effects"})
 BOOL_COLUMNS = frozenset({"visible", "selected"})

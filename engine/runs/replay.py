@@ -183,6 +183,7 @@ class ReplayRun:
             "max_area_fraction": self.settings.max_area_fraction,
             "relevance": str(self.settings.relevance).lower(),
             "selection_order": str(self.settings.selection_order).lower(),
+            "selection": str(self.settings.selection).lower(),
             "budget_at": fraction if mode == "HYBRID" and budget_source is not None else None,
             "budget_source": budget_source, "work": self._work, **versions()}
         try:

@@ -64,7 +64,7 @@ DEFAULT_BUDGETS = 5
 # The baseline is the paper's heuristic with the engine's measured cost model; each other
 # variant changes one knob.  Keys are the Scene.phrt settings a replay overrides.
 BASELINE = {"cost_mode": "MEASURED", "selection_weight": defaults.SELECTION_WEIGHT,
-            "selection_order": "RELEVANCE", "relevance": "PAPER"}
+            "selection_order": "RELEVANCE", "relevance": "PAPER", "selection": "PAPER"}
 VARIANTS = {
     "measured": {},
     "papercost": {"cost_mode": "PAPER"},
@@ -72,6 +72,7 @@ VARIANTS = {
     "i0.1": {"selection_weight": 0.1},
     "rperms": {"selection_order": "RELEVANCE_PER_MS"},
     "error": {"relevance": "ERROR"},
+    "benefit": {"selection": "BENEFIT"},
 }
 
 

@@ -193,6 +193,7 @@ class Settings:
     budget_at: float | None = None  # set: the budget is this fraction of the way from raster to ray traced
     relevance: str = "PAPER"  # 'PAPER' (equation 3) or 'ERROR' (V x expected benefit, see heuristic.py)
     selection_order: str = "RELEVANCE"  # 'RELEVANCE' (the paper's) or 'RELEVANCE_PER_MS'
+    selection: str = "PAPER"  # 'PAPER' (heuristic.py) or 'BENEFIT' (select/benefit_selection.py)
 
 
 @dataclass

@@ -217,6 +217,10 @@ class SelectionResult:
     budget_ms: float | None = None
     relevance_mode: str = "paper"
     order: str = "relevance"
+    # The BENEFIT selection's items: per effect, the elements whose effect is traced (None: every
+    # tagged effect of a selected element), and each element's summed item value.
+    effects: dict | None = None
+    benefit_estimate: np.ndarray | None = None
 
     @property
     def names(self) -> list[str]:
@@ -252,16 +256,23 @@ class SelectionResult:
             "A": as_float(self.A), "P": as_float(self.P), "D": as_float(self.D), "V": as_float(self.V),
             "Q": as_float(self.Q), "C": as_float(self.C), "K": as_float(self.K), "S": as_int(self.S),
             "R": as_float(self.R), "selected": as_int(self.selected), "reason": list(self.reason),
+            "predicted_ms": as_float(self.predicted_ms),
         }
-        if self.terms.weighted_visibility is not None:
+        if self.benefit_estimate is not None:
+            columns["benefit"] = as_float(self.benefit_estimate)
+            columns["effects"] = [";".join(effect for effect in sorted(self.effects) if self.effects[effect][i])
+                                  for i in range(n)]
+        elif self.terms.weighted_visibility is not None:
             columns["benefit"] = as_float(self.terms.weighted_visibility)
         return columns
 
     def rows(self, frame: int | None = None) -> list[dict]:
-        """One dict per element with the keys of SELECTION_COLUMNS, in order (plus ``benefit``,
-        the normalised V x benefit that replaced V in R, under the ``error`` relevance)."""
+        """One dict per element with the keys of SELECTION_COLUMNS, in order, then ``predicted_ms``
+        and, when there is one, ``benefit``: the normalised V x benefit that replaced V in R under
+        the ``error`` relevance, or under the BENEFIT selection the element's summed item value
+        with ``effects``, the effects traced (``;``-separated)."""
         columns = self.columns(frame)
-        keys = SELECTION_COLUMNS + (("benefit",) if "benefit" in columns else ())
+        keys = SELECTION_COLUMNS + tuple(key for key in ("predicted_ms", "benefit", "effects") if key in columns)
         return [dict(zip(keys, values)) for values in zip(*(columns[key] for key in keys))]
 
 

@@ -251,11 +251,13 @@ def test_rows_have_the_contract_columns_in_order():
     elements = frame(2, area_px=np.array([10, 0]))
     result = select(elements, ["e1"], hybrid(), time_left_ms=5, element_ms=np.ones(2))
     rows = result.rows(frame=12)
-    assert [list(row) for row in rows] == [list(schema.SELECTION_COLUMNS)] * 2
+    # The contract's columns in order, then the item's predicted cost (the next round's names).
+    assert [list(row) for row in rows] == [list(schema.SELECTION_COLUMNS) + ["predicted_ms"]] * 2
     assert schema.SELECTION_COLUMNS == ("frame", "element", "visible", "A", "P", "D", "V", "Q", "C", "K", "S",
                                            "R", "selected", "reason")
     assert rows[0] == {"frame": 12, "element": "e0", "visible": 1, "A": 0.01, "P": 1.0, "D": 1.0, "V": 1.0,
-                       "Q": 1.0, "C": 1.0, "K": 1.0, "S": 0, "R": 1.0, "selected": 1, "reason": ""}
+                       "Q": 1.0, "C": 1.0, "K": 1.0, "S": 0, "R": 1.0, "selected": 1, "reason": "",
+                       "predicted_ms": 1.0}
     assert rows[1]["S"] == 1 and rows[1]["R"] == 0.5 and rows[1]["reason"] == "not_visible"
     assert result.columns(frame=12)["reason"] == ["", "not_visible"]
 

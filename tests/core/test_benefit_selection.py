@@ -1,0 +1,133 @@
+"""The BENEFIT selection (select/benefit_selection.py): value, switching cost, exploration, the
+margin, and a frame rendered with it (items traced per effect, rows with their estimates)."""
+import numpy as np
+
+from phrt.phrt_addon.select import benefit_selection
+from phrt.phrt_addon.select.benefit_selection import BenefitSelector
+from phrt.phrt_addon.scene.snapshot import Element
+
+from test_frame import mirror_scene, render
+
+MS_PER_RAY = np.array([1e-3, 1e-3, 1e-3])
+
+
+def choose(selector, names, pixels, priors, cost_ms, time_left, priority=None):
+    n = len(names)
+    pixels = np.asarray(pixels, float).reshape(n, 3)
+    eligible = pixels > 0
+    rays = np.asarray(cost_ms, float).reshape(n, 3) / MS_PER_RAY
+    return selector.choose(names, eligible, pixels, np.asarray(priors, float).reshape(n, 3),
+                           np.ones(n) if priority is None else np.asarray(priority, float), np.ones(n), rays,
+                           MS_PER_RAY, 1.0, time_left, 0.0)
+
+
+def settle_margin(selector):
+    for _ in range(benefit_selection.MARGIN_FRAMES):
+        selector.observe_time(1.0, 1.0)
+
+
+def test_value_is_pixels_changed_times_difference_so_a_small_caster_with_a_large_footprint_wins():
+    selector = BenefitSelector()
+    settle_margin(selector)
+    # Caster: 50 own pixels, but its shadow covers 4000 receiver pixels; the matte's reflection:
+    # 2000 pixels that barely change.  Only one fits.
+    pixels = [[4000, 0, 0], [0, 2000, 0]]
+    priors = [[0.05, 0, 0], [0, 0.01, 0]]
+    choice = choose(selector, ["Caster", "Matte"], pixels, priors, [[8, 0, 0], [0, 8, 0]], 10.0)
+    assert choice.chosen.tolist() == [[True, False, False], [False, False, False]]
+
+
+def test_priority_k_multiplies_value():
+    selector = BenefitSelector()
+    settle_margin(selector)
+    pixels, priors, cost = [[0, 100, 0], [0, 100, 0]], [[0, 0.2, 0], [0, 0.1, 0]], [[0, 8, 0], [0, 8, 0]]
+    assert choose(selector, ["A", "B"], pixels, priors, cost, 10.0).chosen[0, 1]
+    other = BenefitSelector()
+    settle_margin(other)
+    assert choose(other, ["A", "B"], pixels, priors, cost, 10.0, priority=[1.0, 3.0]).chosen[1, 1]
+
+
+def test_an_item_alternating_around_its_rival_does_not_flip_every_frame_but_a_better_one_wins():
+    selector = BenefitSelector()
+    settle_margin(selector)
+    names, pixels, cost = ["A", "B"], [[0, 100, 0], [0, 100, 0]], [[0, 8, 0], [0, 8, 0]]
+    priors = np.array([[0, 0.1, 0], [0, 0.1, 0]], float)
+    flips, state = 0, None
+    for frame in range(30):
+        choice = choose(selector, names, pixels, priors, cost, 10.0)
+        chosen = int(np.argmax(choice.chosen[:, 1]))
+        flips += state is not None and chosen != state
+        state = chosen
+        # Each frame, the traced item measures 5% above or below its rival's estimate.
+        measured = np.zeros((2, 3))
+        measured[chosen, 1] = 100 * 0.1 * (1.05 if frame % 2 else 0.95)
+        selector.observe(names, choice, priors, measured, np.asarray(pixels, float))
+    assert flips <= 2, flips  # exploration may try the other once; no ping-pong
+    # Now B is measured twice as good as A whenever traced: it is taken within 3 frames.
+    selector.estimates[("B", "reflections")] = 0.2
+    taken = []
+    for _ in range(3):
+        choice = choose(selector, names, pixels, priors, cost, 10.0)
+        taken.append(bool(choice.chosen[1, 1]))
+    assert any(taken)
+
+
+def test_a_never_traced_item_is_tried_within_the_exploration_bound_when_it_fits():
+    selector = BenefitSelector()
+    settle_margin(selector)
+    names, pixels, cost = ["Known", "New"], [[0, 100, 0], [0, 100, 0]], [[0, 8, 0], [0, 8, 0]]
+    priors = np.array([[0, 0.5, 0], [0, 0.001, 0]], float)  # the prior says New is worthless
+    tried_at = None
+    for frame in range(benefit_selection.EXPLORE_FRAMES + 2):
+        choice = choose(selector, names, pixels, priors, cost, 10.0)
+        if choice.chosen[1, 1]:
+            tried_at = frame
+            break
+        measured = np.where(choice.chosen, 50.0, 0.0)
+        selector.observe(names, choice, priors, measured, np.asarray(pixels, float))
+    assert tried_at is not None and tried_at <= benefit_selection.EXPLORE_FRAMES
+
+
+def test_the_margin_follows_the_predictions_recent_errors():
+    selector = BenefitSelector()
+    assert selector.margin() == benefit_selection.UNMEASURED_MARGIN
+    for ratio in [1.0] * 10 + [3.0] * 3:  # three frames measured 3x their prediction
+        selector.observe_time(10.0, 10.0 * ratio)
+    assert selector.margin() > 2.0
+    for _ in range(5):  # a few cheap frames later the high ratios are still in the window
+        selector.observe_time(10.0, 10.0)
+    assert selector.margin() > 2.0
+    choice = choose(selector, ["A"], [[0, 100, 0]], [[0, 0.5, 0]], [[0, 6, 0]], 10.0)
+    assert not choice.chosen.any()  # 6 ms predicted does not fit 10 ms once its errors are known
+
+
+def test_a_frame_with_benefit_traces_items_and_logs_their_estimates():
+    snapshot = mirror_scene("HYBRID")
+    snapshot.settings.selection = "BENEFIT"
+    # The block is tagged for reflections too (matte: its reflection changes nearly nothing).
+    snapshot.elements[1] = Element("Block", "Block", priority=1.0, shadows=True, reflections=True,
+                                   refractions=False)
+    result, _, renderer = render(snapshot)
+    rows = {row["element"]: row for row in result.selection_rows}
+    assert rows["Mirror"]["selected"] == 1 and "reflections" in rows["Mirror"]["effects"]
+    assert all(np.isfinite(row["predicted_ms"]) and np.isfinite(row["benefit"]) for row in rows.values())
+    selector = renderer.benefit_selector
+    # The mirror's reflection was traced and measured: its estimate is the red wall it shows.
+    assert selector.observations.get(("Mirror", "reflections"), 0) == 1
+    assert selector.estimates[("Mirror", "reflections")] > 0.05
+    # Rays for the chosen items only: the block's shadow alone when its reflection is left out.
+    effects = result.selection.effects
+    assert effects["shadows"][1] == (result.stats["shadow_rays"] > 0)
+    assert effects["reflections"][1] or result.stats["reflection_rays"] > 0
+
+
+def test_the_mirror_outranks_the_matte_reflection_from_the_first_frame():
+    snapshot = mirror_scene("HYBRID")
+    snapshot.settings.selection = "BENEFIT"
+    snapshot.elements[1] = Element("Block", "Block", priority=1.0, shadows=False, reflections=True,
+                                   refractions=False)
+    result, _, _ = render(snapshot)
+    value = result.selection.benefit_estimate
+    per_pixel_mirror = value[0] / max(result.selection.elements.area_px[0], 1)
+    per_pixel_block = value[1] / max(result.selection.elements.area_px[1], 1)
+    assert per_pixel_mirror > 5 * per_pixel_block
