@@ -3,9 +3,11 @@
     phrt scenes [--out DIR]
     phrt render SCENE [--path NAME] [--frames A-B] [--mode raster|hybrid|raytrace]
                       [--budget-ms T] [--resolution WxH] [--out DIR] [--images exr|png|none] [--overwrite]
+                      [--selection paper|benefit]
     phrt report RUN_DIR... [--reference RUN_DIR] [--out DIR]
     phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
+                     [--selection paper|benefit]
                      [--workers N [--dashboard ADDRESS] | --scheduler ADDRESS [--tls-ca-file F
                      --tls-cert F --tls-key F]]
     phrt rescore SWEEP_DIR [--out DIR]
@@ -28,6 +30,7 @@ from pathlib import Path
 from . import blender_process
 from .arguments import budget_fractions, check_output_dir, check_replay_input, count, number, parse_resolution
 from .blender_process import SAMPLE_DIR, UserError, load_scene
+from ..phrt_addon.schema import SELECTIONS
 from . import advise as advise_command
 from .rescore import command_rescore
 
@@ -55,6 +58,9 @@ def build_parser():
     render.add_argument("--resolution", help="WxH in pixels (default: the scene's)")
     render.add_argument("--out", help="run directory (default: out/<scene>-<path>-<mode>/)")
     render.add_argument("--images", default="exr", type=str.lower, help="exr, png or none")
+    render.add_argument("--selection", type=str.lower, choices=SELECTIONS,
+                        help="what the hybrid frames trace: paper (the paper's heuristic) or benefit (the "
+                             "benefit-per-ms items); default the scene's setting")
     render.add_argument("--overwrite", action="store_true",
                         help="replace the run --out holds (its files are removed first); without it such a folder "
                              "is refused")
@@ -79,6 +85,9 @@ def build_parser():
     sweep.add_argument("--out", help="sweep folder (default: out/<scene>-<path>-sweep/)")
     sweep.add_argument("--oracle-every", type=count, default=None, metavar="K",
                        help="the oracle judges every K-th frame (default 8)")
+    sweep.add_argument("--selection", type=str.lower, choices=SELECTIONS,
+                       help="the selection of every variant that does not choose its own (default paper; "
+                            "the benefit variant is always benefit)")
     sweep.add_argument("--variants", metavar="NAME[,NAME...]",
                        help="selection variants of the hybrid runs (default all: measured, papercost, i0, i0.1, "
                             "rperms, error)")
@@ -167,7 +176,8 @@ def command_render(args):
             result = replay_module.replay(scene, camera, frame_range, args.mode, out, images=args.images,
                                           budget_ms=args.budget_ms, resolution=resolution, scene_label=label,
                                           on_progress=progress, budget_at=args.budget_at,
-                                          overwrite=args.overwrite)
+                                          overwrite=args.overwrite,
+                                          overrides={"selection": args.selection.upper()} if args.selection else None)
     except camera_path.ReplayError as error:
         raise UserError(str(error)) from None
     for line in result.problems:  # each problem of the scene once, with its count
@@ -242,7 +252,8 @@ def command_sweep(args):
         raise UserError(problem)
     try:
         plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
-                                      oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY)
+                                      oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY,
+                                      selection=args.selection)
     except plan_module.PlanError as error:
         raise UserError(str(error)) from None
     executor = cluster.start_executor(args.workers, args.scheduler, cluster_options)

@@ -175,7 +175,8 @@ class FrameRenderer:
 
         # -- lighting and composite (GPU) -----------------------------------------
         start = _timer()
-        measure = (learn_benefit or choice is not None) and traced is not None
+        measure = traced is not None and (learn_benefit or (choice is not None and self.benefit_selector.wants_measurement(
+            frame_elements.names, choice, self.frames_rendered)))
         combined = raster.shade(traced, measure_change=measure)
         composite_ms = _ms(start)
         # Uploading the traced results is part of the tracing's cost, which scales with the selection.
@@ -192,7 +193,7 @@ class FrameRenderer:
             measured = item_benefit.measure(snapshot, layers, raster.traced_change(), traced, choice.chosen,
                                             element_bounds) if measure else None
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
-            if traced is not None:
+            if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
                 self.benefit_selector.observe_time(selection.predicted_trace_ms,
                                                    max(trace_ms - counters.upload_ms, 0.0))
             select_ms += _ms(start)
@@ -249,13 +250,14 @@ class FrameRenderer:
         competing = terms.candidate & terms.visible & terms.within_area
         pixels = item_benefit.item_pixels(area_px, footprint)
         eligible = flags & competing[:, None] & (pixels > 0)
-        state = self.cost_model.state()
-        ms_per_ray = [state[f"{effect}_ms_per_ray"] for effect in ("shadows", "reflections", "refractions")]
         overhead = self.cost_model.trace_overhead_ms()
-        choice = self.benefit_selector.choose(
-            frame_elements.names, eligible, pixels, priors, frame_elements.priority, frame_elements.rt_cost,
-            effect_rays * np.asarray(area_px, np.float64)[:, None], ms_per_ray, state["measured_residual"],
-            selection.time_left_ms, overhead)
+        none = np.zeros(len(flags), bool)
+        cost_ms = np.stack([self.cost_model.predict_element_ms(dataclass_replace(
+            frame_elements, shadows=flags[:, 0] if j == 0 else none, reflections=flags[:, 1] if j == 1 else none,
+            refractions=flags[:, 2] if j == 2 else none, rays_per_pixel=effect_rays[:, j]), terms.cost, "measured")
+            for j in range(3)], axis=1)
+        choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
+                                              cost_ms, selection.time_left_ms, overhead)
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)

@@ -192,8 +192,11 @@ def run_id(scene_label: str, path: str, mode: str, budget_at: float | None = Non
 
 
 def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budgets: Sequence[float],
-               variants: Sequence[str] = tuple(VARIANTS), oracle_every: int = oracle.DEFAULT_EVERY) -> Plan:
-    """The jobs of a sweep: raster, raytrace, every (budget, variant) hybrid, then the oracle."""
+               variants: Sequence[str] = tuple(VARIANTS), oracle_every: int = oracle.DEFAULT_EVERY,
+               selection: str | None = None) -> Plan:
+    """The jobs of a sweep: raster, raytrace, every (budget, variant) hybrid, then the oracle.
+    ``selection`` ('paper' or 'benefit'): the selection of every variant that does not set its
+    own (``benefit`` does), instead of the paper's."""
     unknown = [name for name in variants if name not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown variants {unknown}: use some of {', '.join(VARIANTS)}")
@@ -202,13 +205,18 @@ def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budg
     for fraction in budgets:
         if not 0.0 <= float(fraction) <= 1.0:
             raise ValueError(f"budget fraction {fraction} is outside 0..1")
+    base = dict(BASELINE)
+    if selection is not None:
+        if str(selection).lower() not in schema.SELECTIONS:
+            raise ValueError(f"selection must be one of {', '.join(schema.SELECTIONS)}, not {selection!r}")
+        base["selection"] = str(selection).upper()
     raster = Job(run_id(scene_label, path, "RASTER"), "run", "RASTER")
     raytrace = Job(run_id(scene_label, path, "RAYTRACE"), "run", "RAYTRACE")
     jobs = [raster, raytrace]
     for fraction in budgets:
         for name in variants:
             jobs.append(Job(run_id(scene_label, path, "HYBRID", float(fraction), name), "run", "HYBRID",
-                            budget_at=float(fraction), variant=name, overrides={**BASELINE, **VARIANTS[name]},
+                            budget_at=float(fraction), variant=name, overrides={**base, **VARIANTS[name]},
                             depends_on=[raster.id, raytrace.id]))
     hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
     jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raster.id, raytrace.id, *hybrids]))

@@ -23,15 +23,18 @@ Switching cost
     Changing an item's state pops its pixels by about its own value (what tracing changes
     there), so dropping a selected item costs ``SWITCH`` times its value and adding one costs
     the same: a rival must be worth (1 + SWITCH) / (1 - SWITCH) times more to displace it;
-    a clearly better item wins at once.
+    a clearly better item wins at once.  An item not traced last frame must also fit with
+    ``ADD_SLACK`` to spare, so the frame-to-frame noise of the time left does not toggle the
+    item that just fits.
 Cost
-    Per item from the cost model's learned cost per ray of its effect and global residual
-    (Q = 1 is the measured cost, a designer's Q scales it), the rays it casts (its pixels
-    times one reflection ray and its hit's shadow rays, two refraction rays and their shadow
-    rays, or one shadow ray per footprint pixel); the trace stage's fixed overhead is charged
-    once; the time left is shrunk by a margin, the 90th percentile of the last
-    ``MARGIN_FRAMES`` frames' measured / predicted trace time (``UNMEASURED_MARGIN`` before
-    any), so a prediction found too low is not believed again after a few cheap frames.
+    Per item from the cost model (``measured`` mode, the element with that one effect: its
+    pixels, the rays one pixel of the effect casts, the element's learned rays ratio, the
+    effect's learned ms per ray and the residual; Q = 1 is the measured cost, a designer's Q
+    scales it); the trace stage's fixed overhead is charged once; the time left is divided
+    by a margin, the 90th percentile of the last ``MARGIN_FRAMES`` frames' measured / predicted
+    trace time (``UNMEASURED_MARGIN`` before any; within MIN_MARGIN..MAX_MARGIN): a prediction
+    found too low is not believed again after a few cheap frames, one found too high over the
+    whole window lets the time be filled.
 Choice
     ``knapsack.solve`` within the time left.
 
@@ -48,7 +51,10 @@ import numpy as np
 from . import knapsack
 from ..schema import EFFECTS
 
-SWITCH = 0.15
+SWITCH = 0.25
+# An item not traced last frame is charged this share more than its predicted ms: it must fit
+# with room to spare, so the time left's frame-to-frame noise does not toggle it.
+ADD_SLACK = 0.25
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
@@ -56,6 +62,10 @@ MARGIN_FRAMES = 20
 MARGIN_QUANTILE = 90
 UNMEASURED_MARGIN = 1.5
 MAX_MARGIN = 4.0
+MIN_MARGIN = 0.5
+# Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
+# on any frame that traces an item never measured.
+MEASURE_EVERY = 2
 MAX_VALUE = 1e15
 
 
@@ -95,7 +105,7 @@ class BenefitSelector:
     def margin(self) -> float:
         if not self.ratios:
             return UNMEASURED_MARGIN
-        return float(np.clip(np.percentile(np.asarray(self.ratios), MARGIN_QUANTILE), 1.0, MAX_MARGIN))
+        return float(np.clip(np.percentile(np.asarray(self.ratios), MARGIN_QUANTILE), MIN_MARGIN, MAX_MARGIN))
 
     def per_pixel(self, names, priors: np.ndarray, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) learned estimates (prior where never measured) and (n, 3) never-measured flags."""
@@ -109,17 +119,14 @@ class BenefitSelector:
                     fresh[i, j] = False
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
-    def choose(self, names, eligible, pixels, priors, priority, rt_cost, rays, ms_per_ray, residual,
-               time_left_ms, overhead_ms) -> ItemChoice:
-        """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` and
-        ``rt_cost`` (n,); ``rays`` the rays each item casts, ``ms_per_ray`` (3,) the cost model's."""
+    def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms) -> ItemChoice:
+        """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
+        ``cost_ms`` each item's predicted ms (the cost model's, Q included)."""
         eligible = np.asarray(eligible, bool)
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
         value = np.where(eligible, np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
-        cost = (np.asarray(rays, np.float64) * np.asarray(ms_per_ray, np.float64)[None, :] * float(residual)
-                * np.asarray(rt_cost, np.float64)[:, None])
-        cost = np.clip(np.nan_to_num(cost, nan=np.inf, posinf=np.inf), 0.0, np.inf)
+        cost = np.clip(np.nan_to_num(np.asarray(cost_ms, np.float64), nan=np.inf, posinf=np.inf), 0.0, np.inf)
         margin = self.margin()
         capacity = max(float(time_left_ms) - float(overhead_ms), 0.0) / margin
 
@@ -130,11 +137,12 @@ class BenefitSelector:
         adjusted = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
         waited = np.array([[self.waited.get((name, effect), 0) for effect in EFFECTS] for name in names],
                           np.float64).reshape(eligible.shape)
-        explore = eligible & fresh & (cost <= capacity)
+        explore = eligible & fresh & (cost * (1.0 + ADD_SLACK) <= capacity)
         if np.any(explore):
             total = float(adjusted[eligible].sum()) + 1e-12
             adjusted = adjusted + np.where(explore, total * np.minimum((waited + 1) / EXPLORE_FRAMES, 1.0), 0.0)
-        flat = knapsack.solve(np.where(eligible, adjusted, 0.0).ravel(), np.where(eligible, cost, np.inf).ravel(),
+        charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
+        flat = knapsack.solve(np.where(eligible, adjusted, 0.0).ravel(), np.where(eligible, charged, np.inf).ravel(),
                               capacity)
         chosen = flat.reshape(eligible.shape) & eligible
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
@@ -162,6 +170,11 @@ class BenefitSelector:
                     self.estimates[key] += DECAY * (prior - self.estimates[key])
                 else:
                     self.waited[key] = self.waited.get(key, 0) + 1
+
+    def wants_measurement(self, names, choice: ItemChoice, frame_index: int) -> bool:
+        if frame_index % MEASURE_EVERY == 0:
+            return True
+        return any((names[i], EFFECTS[j]) not in self.estimates for i, j in zip(*np.nonzero(choice.chosen)))
 
     def observe_time(self, predicted_ms: float, measured_ms: float) -> None:
         """A traced frame's predicted and measured trace time (the margin's sample)."""

@@ -100,6 +100,8 @@ class TraceResult:
     # (a bounce's hit shadow rays and further bounces included) goes to the elements whose pixels
     # cast it, shared in proportion where casters' shadow regions overlap; summed, the counters' rays.
     element_rays: np.ndarray = None
+    # (n_elements, 3) the same rays split by effect (EFFECTS order): what each item cast.
+    item_rays: np.ndarray = None
 
 
 class TraceStage:
@@ -136,7 +138,7 @@ class TraceStage:
         from .tracer import RadianceTracer, leave_surface, reflection_blend
 
         counters = TraceCounters()
-        element_rays = np.zeros(len(snapshot.elements))
+        item_rays = np.zeros((len(snapshot.elements), len(EFFECTS)))
         wanted_effects = traced_effects(snapshot.elements, selected, effects)
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
@@ -198,7 +200,7 @@ class TraceStage:
                     pixels.flat[idx], np.where(blocked, 0.0, 1.0).astype(np.float32))
                 counters.shadow_rays += len(idx)
                 # A ray in overlapping casters' regions is shared between them.
-                _attribute(element_rays, casters, [np.count_nonzero(caster_region[idx]) for caster_region
+                _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[idx]) for caster_region
                                                    in caster_regions], len(idx))
         counters.shadow_ms = _ms(start)
         # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
@@ -223,7 +225,7 @@ class TraceStage:
             radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
             blend = reflection_blend(pixels.roughness[idx])[:, None]
             traced.reflection[layer_name] = (pixels.flat[idx], blend * radiance + (1.0 - blend) * world)
-            _attribute_to_pixels(element_rays, element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
+            _attribute_to_pixels(item_rays[:, 1], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.reflection_ms = _ms(start)
 
@@ -245,7 +247,7 @@ class TraceStage:
                 layer_rays_before = tracer.rays + tracer.shadow_rays
                 radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
                 traced.refraction = (pixels.flat[idx], radiance)
-                _attribute_to_pixels(element_rays, element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
+                _attribute_to_pixels(item_rays[:, 2], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.refraction_ms = _ms(start)
-        return TraceResult(traced=traced, counters=counters, element_rays=element_rays)
+        return TraceResult(traced=traced, counters=counters, element_rays=item_rays.sum(axis=1), item_rays=item_rays)

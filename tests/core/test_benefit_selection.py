@@ -8,17 +8,14 @@ from phrt.phrt_addon.scene.snapshot import Element
 
 from test_frame import mirror_scene, render
 
-MS_PER_RAY = np.array([1e-3, 1e-3, 1e-3])
-
 
 def choose(selector, names, pixels, priors, cost_ms, time_left, priority=None):
     n = len(names)
     pixels = np.asarray(pixels, float).reshape(n, 3)
     eligible = pixels > 0
-    rays = np.asarray(cost_ms, float).reshape(n, 3) / MS_PER_RAY
     return selector.choose(names, eligible, pixels, np.asarray(priors, float).reshape(n, 3),
-                           np.ones(n) if priority is None else np.asarray(priority, float), np.ones(n), rays,
-                           MS_PER_RAY, 1.0, time_left, 0.0)
+                           np.ones(n) if priority is None else np.asarray(priority, float),
+                           np.asarray(cost_ms, float).reshape(n, 3), time_left, 0.0)
 
 
 def settle_margin(selector):
