@@ -214,3 +214,27 @@ def reconstruct(flat_wanted, flat_traced, values, guide: Guide, width: int, rate
     vals = np.concatenate([field[traced_wanted], out[got]])
     order = np.argsort(flat, kind="stable")
     return result(flat[order], vals[order], missing[~got])
+
+
+def element_rates(rates, effect: str, n_elements: int) -> np.ndarray:
+    """(n_elements + 1,) the rate of each element's ``effect`` from ``rates`` (effect name ->
+    per-element rates, or None; 1.0 where not given), checked against ``RATES``; the last entry
+    (pixels of no element, index -1) is 1.0."""
+    result = np.ones(n_elements + 1)
+    given = None if rates is None else rates.get(effect)
+    if given is not None:
+        given = np.broadcast_to(np.asarray(given, np.float64), (n_elements,))
+        result[:n_elements] = [check_rate(value) for value in given]
+    return result
+
+
+def traced_subset(flat, pixel_rate, height: int, width: int, frame: int) -> np.ndarray:
+    """Bool per pixel of ``flat`` (flat indices of an (height, width) image): whether it gets rays
+    on ``frame`` at its rate ``pixel_rate`` (a number or one per pixel)."""
+    flat = np.asarray(flat, np.int64)
+    pixel_rate = np.broadcast_to(np.asarray(pixel_rate, np.float64), flat.shape)
+    cast = np.zeros(flat.shape, bool)
+    for rate in np.unique(pixel_rate):
+        chosen = pixel_rate == rate
+        cast[chosen] = traced_pixel_mask(height, width, rate, frame).ravel()[flat[chosen]]
+    return cast
