@@ -14,6 +14,10 @@ what is selected).
 - Reflections: one mirror ray per pixel of a selected reflecting element, blended
   towards the environment by roughness (``tracer.reflection_blend``).
 - Refractions: the transparent layer's pixels of a selected refracting element.
+Rates (``rates.py``): an effect traced at half or quarter rate casts its rays only at the
+pixels of that frame's pattern (a shadow pixel takes the highest rate of the casters whose
+regions hold it); the other pixels are reconstructed from the layer's G-buffer (depth,
+normal, element id), and those that cannot be keep the raster term.
 Rays leave along the geometric normal (``LayerPixels.geometric_normals``).
 ``embreex`` is imported only here, on the first traced frame.
 """
@@ -26,6 +30,7 @@ import numpy as np
 
 from ..scene import rules, shading
 from ..frame_types import TracedTerms
+from .rates import element_rates, layer_guide, reconstruct, traced_subset
 from .shadow_region import PointChunks, TiledShadowRegions
 
 
@@ -102,6 +107,11 @@ class TraceResult:
     element_rays: np.ndarray = None
     # (n_elements, 3) the same rays split by effect (EFFECTS order): what each item cast.
     item_rays: np.ndarray = None
+    # (h, w) float32, the ``PHRT Rate`` debug pass: per pixel the highest rate of any effect (either
+    # layer) whose traced or reconstructed value replaced the raster term there, 0 elsewhere
+    # (row 0 at the bottom); ``effect_rate``: the same per effect name.
+    rate: np.ndarray | None = None
+    effect_rate: dict = field(default_factory=dict)
 
 
 class TraceStage:
@@ -128,12 +138,14 @@ class TraceStage:
             entry = self._textures[id(texture)] = (texture, rules.prepare_texture(texture))
         return entry[1]
 
-    def run(self, snapshot, layers, materials, selected, element_bounds, effects=None) -> TraceResult:
+    def run(self, snapshot, layers, materials, selected, element_bounds, effects=None, rates=None) -> TraceResult:
         """Trace the selected elements' effects from the read-back ``layers``.
 
         ``effects`` (optional): per effect name (``shadows``, ``reflections``, ``refractions``)
         a bool array over elements of those whose effect is traced, for selections of
-        (element, effect) items; by default every tagged effect of a selected element."""
+        (element, effect) items; by default every tagged effect of a selected element.
+        ``rates`` (optional): per effect name a float array over elements of the rate each
+        element's effect is traced at (one of ``rates.RATES``; 1.0 where not given)."""
         from .embree_scene import TraceScene
         from .tracer import RadianceTracer, leave_surface, reflection_blend
 
@@ -156,6 +168,29 @@ class TraceStage:
         traced = TracedTerms()
         world = np.asarray(snapshot.world_color, dtype=np.float64)
         n_elements = len(elements)
+        rate_of = {effect: element_rates(rates, effect, n_elements) for effect in EFFECTS}
+        height, width = next(iter(layers.values())).layer.covered.shape
+        effect_rate = {effect: np.zeros(height * width, np.float32) for effect in EFFECTS}
+        guides = {}
+
+        def rated(pixels, idx, pixel_rate):
+            """Of the layer's pixels ``idx`` wanting an effect at ``pixel_rate``, those cast this frame."""
+            if np.all(pixel_rate == 1.0):
+                return np.ones(len(idx), bool)
+            return traced_subset(pixels.flat[idx], pixel_rate, height, width, snapshot.frame)
+
+        def filled(effect, layer_name, pixels, idx, cast, values, pixel_rate):
+            """(flat pixels, values) of ``effect`` at every pixel of ``idx`` that has one: the
+            traced ``values`` at ``idx[cast]``, the others reconstructed."""
+            flat = pixels.flat[idx]
+            if not np.all(cast):
+                if layer_name not in guides:
+                    guides[layer_name] = layer_guide(pixels.layer)
+                out = reconstruct(flat, flat[cast], values, guides[layer_name], width, pixel_rate)
+                pixel_rate = pixel_rate[np.searchsorted(flat, out.flat)]
+                flat, values = out.flat, out.values.astype(values.dtype)
+            np.maximum.at(effect_rate[effect], flat, np.broadcast_to(pixel_rate, flat.shape).astype(np.float32))
+            return flat, values
 
         def ray_start(pixels, idx, view_dirs):
             """Trace-frame points, their geometric normals facing the camera and ray offsets."""
@@ -193,15 +228,23 @@ class TraceStage:
                 idx, direction, view_dirs = idx[facing], direction[facing], view_dirs[facing]
                 if len(idx) == 0:
                     continue
-                points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
+                # A pixel in several casters' regions is traced at the highest of their rates.
+                pixel_rate = np.zeros(len(idx))
+                for caster, caster_region in zip(casters, caster_regions):
+                    pixel_rate = np.where(caster_region[idx], np.maximum(pixel_rate, rate_of["shadows"][caster]),
+                                          pixel_rate)
+                cast = rated(pixels, idx, pixel_rate)
+                ray_idx = idx[cast]
+                points_trace, normal, eps = ray_start(pixels, ray_idx, view_dirs[cast])
                 _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                blocked = scene.occluded(points_trace + normal * eps[:, None], direction, distance - 2 * eps)
-                traced.shadow_visibility[(layer_name, light_index)] = (
-                    pixels.flat[idx], np.where(blocked, 0.0, 1.0).astype(np.float32))
-                counters.shadow_rays += len(idx)
+                blocked = scene.occluded(points_trace + normal * eps[:, None], direction[cast], distance - 2 * eps)
+                traced.shadow_visibility[(layer_name, light_index)] = filled(
+                    "shadows", layer_name, pixels, idx, cast, np.where(blocked, 0.0, 1.0).astype(np.float32),
+                    pixel_rate)
+                counters.shadow_rays += len(ray_idx)
                 # A ray in overlapping casters' regions is shared between them.
-                _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[idx]) for caster_region
-                                                   in caster_regions], len(idx))
+                _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region
+                                                   in caster_regions], len(ray_idx))
         counters.shadow_ms = _ms(start)
         # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
         bounces = int(snapshot.settings.max_bounces) >= 1
@@ -215,16 +258,20 @@ class TraceStage:
                 continue
             element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
             wanted = reflecting[element_of] & (reflection_blend(pixels.roughness) > 0)
-            idx = np.flatnonzero(wanted)
-            if len(idx) == 0:
+            wanted_idx = np.flatnonzero(wanted)
+            if len(wanted_idx) == 0:
                 continue
+            pixel_rate = rate_of["reflections"][element_of[wanted_idx]]
+            cast = rated(pixels, wanted_idx, pixel_rate)
+            idx = wanted_idx[cast]
             view_dirs = pixels.view_directions(idx)
             points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
             direction = leave_surface(shading.reflect(view_dirs, pixels.normals(idx, view_dirs)), normal)
             layer_rays_before = tracer.rays + tracer.shadow_rays
             radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
             blend = reflection_blend(pixels.roughness[idx])[:, None]
-            traced.reflection[layer_name] = (pixels.flat[idx], blend * radiance + (1.0 - blend) * world)
+            traced.reflection[layer_name] = filled("reflections", layer_name, pixels, wanted_idx, cast,
+                                                   blend * radiance + (1.0 - blend) * world, pixel_rate)
             _attribute_to_pixels(item_rays[:, 1], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.reflection_ms = _ms(start)
@@ -237,7 +284,10 @@ class TraceStage:
             refracting = np.r_[wanted_effects["refractions"], False]
             element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
             wanted = refracting[element_of] & (materials.transmissive[pixels.material] > rules.TRANSPARENT_EPSILON)
-            idx = np.flatnonzero(wanted)
+            wanted_idx = np.flatnonzero(wanted)
+            pixel_rate = rate_of["refractions"][element_of[wanted_idx]]
+            cast = rated(pixels, wanted_idx, pixel_rate)
+            idx = wanted_idx[cast]
             if len(idx):
                 view_dirs = pixels.view_directions(idx)
                 points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
@@ -246,8 +296,11 @@ class TraceStage:
                 direction = leave_surface(direction, normal, side=-1.0)
                 layer_rays_before = tracer.rays + tracer.shadow_rays
                 radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
-                traced.refraction = (pixels.flat[idx], radiance)
+                traced.refraction = filled("refractions", "transparent", pixels, wanted_idx, cast, radiance,
+                                           pixel_rate)
                 _attribute_to_pixels(item_rays[:, 2], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.refraction_ms = _ms(start)
-        return TraceResult(traced=traced, counters=counters, element_rays=item_rays.sum(axis=1), item_rays=item_rays)
+        effect_rate = {effect: image.reshape(height, width) for effect, image in effect_rate.items()}
+        return TraceResult(traced=traced, counters=counters, element_rays=item_rays.sum(axis=1), item_rays=item_rays,
+                           rate=np.maximum.reduce(list(effect_rate.values())), effect_rate=effect_rate)
