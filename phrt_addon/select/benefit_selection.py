@@ -30,11 +30,14 @@ Cost
     Per item from the cost model (``measured`` mode, the element with that one effect: its
     pixels, the rays one pixel of the effect casts, the element's learned rays ratio, the
     effect's learned ms per ray and the residual; Q = 1 is the measured cost, a designer's Q
-    scales it); the trace stage's fixed overhead is charged once; the time left is divided
-    by a margin, the 90th percentile of the last ``MARGIN_FRAMES`` frames' measured / predicted
-    trace time (``UNMEASURED_MARGIN`` before any; within MIN_MARGIN..MAX_MARGIN): a prediction
-    found too low is not believed again after a few cheap frames, one found too high over the
-    whole window lets the time be filled.
+    scales it); the trace stage's fixed overhead is charged once; the time left is reduced by
+    a margin, the 80th percentile of (measured - predicted) trace ms over the traced frames among
+    the last ``MARGIN_FRAMES`` frames (before any, the time left is divided by
+    ``UNMEASURED_MARGIN``; within -half..all of the time left): a prediction found too low is not
+    believed again after a few cheap frames, one found too high lets the time be filled.  The
+    margin is additive (the trace stage's fixed work per light and layer is what the per-item
+    costs miss, whatever is chosen), and it ages by frames, so a frame that traces nothing
+    cannot freeze it.
 Choice
     ``knapsack.solve`` within the time left.
 
@@ -59,10 +62,8 @@ DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
 MARGIN_FRAMES = 20
-MARGIN_QUANTILE = 90
+MARGIN_QUANTILE = 80
 UNMEASURED_MARGIN = 1.5
-MAX_MARGIN = 4.0
-MIN_MARGIN = 0.5
 # Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
 # on any frame that traces an item never measured.
 MEASURE_EVERY = 2
@@ -78,8 +79,8 @@ class ItemChoice:
     value: np.ndarray         # (n, 3) expected error reduction (K included, no bonus)
     cost_ms: np.ndarray       # (n, 3) predicted ms
     per_pixel: np.ndarray     # (n, 3) the per-pixel estimate used
-    capacity_ms: float        # the time the knapsack filled (T less overhead, over the margin)
-    margin: float
+    capacity_ms: float        # the time the knapsack filled (T less overhead, less the margin)
+    margin_ms: float
 
     @property
     def effects(self) -> dict[str, np.ndarray]:
@@ -99,13 +100,16 @@ class BenefitSelector:
         self.observations: dict[tuple[str, str], int] = {}
         self.waited: dict[tuple[str, str], int] = {}
         self.previous: set[tuple[str, str]] = set()
-        self.ratios: deque = deque(maxlen=MARGIN_FRAMES)
+        self.errors: deque = deque(maxlen=MARGIN_FRAMES)  # (frame count, measured - predicted ms)
+        self.frames = 0
 
     # -- the decision ------------------------------------------------------------
-    def margin(self) -> float:
-        if not self.ratios:
-            return UNMEASURED_MARGIN
-        return float(np.clip(np.percentile(np.asarray(self.ratios), MARGIN_QUANTILE), MIN_MARGIN, MAX_MARGIN))
+    def margin_ms(self, available_ms: float) -> float:
+        """What the time left loses to the predictions' recent errors (see the module docstring)."""
+        recent = [error for frame, error in self.errors if frame > self.frames - MARGIN_FRAMES]
+        if not recent:
+            return available_ms - available_ms / UNMEASURED_MARGIN
+        return float(np.clip(np.percentile(np.asarray(recent), MARGIN_QUANTILE), -0.5 * available_ms, available_ms))
 
     def per_pixel(self, names, priors: np.ndarray, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) learned estimates (prior where never measured) and (n, 3) never-measured flags."""
@@ -127,8 +131,10 @@ class BenefitSelector:
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
         value = np.where(eligible, np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
         cost = np.clip(np.nan_to_num(np.asarray(cost_ms, np.float64), nan=np.inf, posinf=np.inf), 0.0, np.inf)
-        margin = self.margin()
-        capacity = max(float(time_left_ms) - float(overhead_ms), 0.0) / margin
+        self.frames += 1
+        available = max(float(time_left_ms) - float(overhead_ms), 0.0)
+        margin = self.margin_ms(available)
+        capacity = max(available - margin, 0.0)
 
         was = np.zeros_like(eligible)
         for i, name in enumerate(names):
@@ -146,7 +152,7 @@ class BenefitSelector:
                               capacity)
         chosen = flat.reshape(eligible.shape) & eligible
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
-                          per_pixel=per_pixel, capacity_ms=capacity, margin=margin)
+                          per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin)
 
     # -- learning ------------------------------------------------------------------
     def observe(self, names, choice: ItemChoice, priors, measured=None, pixels=None) -> None:
@@ -178,5 +184,5 @@ class BenefitSelector:
 
     def observe_time(self, predicted_ms: float, measured_ms: float) -> None:
         """A traced frame's predicted and measured trace time (the margin's sample)."""
-        if predicted_ms > 0 and np.isfinite(measured_ms) and measured_ms >= 0:
-            self.ratios.append(float(measured_ms) / float(predicted_ms))
+        if np.isfinite(predicted_ms) and np.isfinite(measured_ms) and measured_ms >= 0:
+            self.errors.append((self.frames, float(measured_ms) - float(predicted_ms)))

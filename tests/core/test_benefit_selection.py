@@ -1,6 +1,7 @@
 """The BENEFIT selection (select/benefit_selection.py): value, switching cost, exploration, the
 margin, and a frame rendered with it (items traced per effect, rows with their estimates)."""
 import numpy as np
+import pytest
 
 from phrt.phrt_addon.select import benefit_selection
 from phrt.phrt_addon.select.benefit_selection import BenefitSelector
@@ -9,7 +10,10 @@ from phrt.phrt_addon.scene.snapshot import Element
 from test_frame import mirror_scene, render
 
 
-def choose(selector, names, pixels, priors, cost_ms, time_left, priority=None):
+def choose(selector, names, pixels, priors, cost_ms, time_left, priority=None, exact=True):
+    """One frame's choice; ``exact``: the frame before was predicted exactly (no margin)."""
+    if exact:
+        selector.observe_time(1.0, 1.0)
     n = len(names)
     pixels = np.asarray(pixels, float).reshape(n, 3)
     eligible = pixels > 0
@@ -19,8 +23,7 @@ def choose(selector, names, pixels, priors, cost_ms, time_left, priority=None):
 
 
 def settle_margin(selector):
-    for _ in range(benefit_selection.MARGIN_FRAMES):
-        selector.observe_time(1.0, 1.0)
+    selector.observe_time(1.0, 1.0)  # one exact prediction: no margin
 
 
 def test_value_is_pixels_changed_times_difference_so_a_small_caster_with_a_large_footprint_wins():
@@ -85,17 +88,24 @@ def test_a_never_traced_item_is_tried_within_the_exploration_bound_when_it_fits(
     assert tried_at is not None and tried_at <= benefit_selection.EXPLORE_FRAMES
 
 
-def test_the_margin_follows_the_predictions_recent_errors():
+def test_the_margin_follows_the_predictions_recent_errors_and_ages_by_frames():
     selector = BenefitSelector()
-    assert selector.margin() == benefit_selection.UNMEASURED_MARGIN
-    for ratio in [1.0] * 10 + [3.0] * 3:  # three frames measured 3x their prediction
-        selector.observe_time(10.0, 10.0 * ratio)
-    assert selector.margin() > 2.0
-    for _ in range(5):  # a few cheap frames later the high ratios are still in the window
-        selector.observe_time(10.0, 10.0)
-    assert selector.margin() > 2.0
-    choice = choose(selector, ["A"], [[0, 100, 0]], [[0, 0.5, 0]], [[0, 6, 0]], 10.0)
-    assert not choice.chosen.any()  # 6 ms predicted does not fit 10 ms once its errors are known
+    assert selector.margin_ms(30.0) == pytest.approx(30.0 - 30.0 / benefit_selection.UNMEASURED_MARGIN)
+    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.5, 0]], [[0, 4, 0]]
+    for error in [0.0] * 10 + [8.0] * 4:  # four frames measured 8 ms above their prediction
+        choose(selector, names, pixels, priors, cost, 10.0, exact=False)
+        selector.observe_time(4.0, 4.0 + error)
+    assert selector.margin_ms(10.0) >= 8.0
+    # 4 ms predicted no longer fits 10 ms once its errors are known; a few exact frames later the
+    # errors are still in the window.
+    for _ in range(3):
+        assert not choose(selector, names, pixels, priors, cost, 10.0, exact=False).chosen.any()
+        selector.observe_time(4.0, 4.0)
+    # Frames that trace nothing age the errors out: the item is tried again.
+    tried = False
+    for _ in range(benefit_selection.MARGIN_FRAMES + 1):
+        tried |= bool(choose(selector, names, pixels, priors, cost, 10.0, exact=False).chosen.any())
+    assert tried
 
 
 def test_a_frame_with_benefit_traces_items_and_logs_their_estimates():
