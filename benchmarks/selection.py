@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 
+from ..phrt_addon.select.benefit_selection import BenefitSelector
 from ..phrt_addon.select.cost_model import EFFECTS, CostModel, FrameStats
 from ..phrt_addon.select.heuristic import select
 from ..phrt_addon.select.selection_terms import FrameElements, SelectionSettings
@@ -102,5 +103,43 @@ def run(out=print, sizes=SIZES) -> list[dict]:
     return rows
 
 
+def time_benefit_choice(n: int, min_seconds: float = 0.2, max_repeats: int = 200, seed: int = 0) -> dict:
+    """Median ms of the BENEFIT selection's choice (values, switching, exploration, knapsack) over
+    the 3 effects of n candidates, a third of the items' cost fitting, half of them kept."""
+    rng = np.random.default_rng(seed)
+    names = [f"element{i}" for i in range(n)]
+    eligible = rng.random((n, 3)) < 0.5
+    pixels = rng.integers(1, 5000, (n, 3)).astype(float)
+    priors = rng.random((n, 3)) * 0.3
+    cost = rng.random((n, 3)) * 5.0
+    time_left = float(cost[eligible].sum()) / 3
+    selector = BenefitSelector()
+    choice = selector.choose(names, eligible, pixels, priors, np.ones(n), cost, time_left, 0.0)
+    selector.observe(names, choice, priors, np.where(choice.chosen, pixels * priors, 0.0), pixels)
+    selector.observe_time(1.0, 1.0)
+    times = []
+    started = time.perf_counter()
+    while len(times) < 3 or (time.perf_counter() - started < min_seconds and len(times) < max_repeats):
+        begin = time.perf_counter()
+        choice = selector.choose(names, eligible, pixels, priors, np.ones(n), cost, time_left, 0.0)
+        times.append((time.perf_counter() - begin) * 1e3)
+    return dict(n=n, items=int(eligible.sum()), choose_ms=statistics.median(times), chosen=int(choice.chosen.sum()))
+
+
+def run_benefit(out=print, sizes=SIZES[:4]) -> list[dict]:
+    """Time the BENEFIT choice for each size and print the table; returns its rows."""
+    rows = []
+    out("BENEFIT selection: choice per frame (median), 3 effects per candidate, half of them tagged")
+    out(f"{'candidates':>10} {'items':>7} {'choose ms':>10} {'chosen':>7} {'target':>16}")
+    for n in sizes:
+        row = time_benefit_choice(n)
+        target = TARGETS_MS.get(n)
+        verdict = "" if target is None else f"< {target:g} ms {'ok' if row['choose_ms'] < target else 'MISSED'}"
+        out(f"{n:>10,} {row['items']:>7,} {row['choose_ms']:10.3f} {row['chosen']:>7,} {verdict:>16}")
+        rows.append(row)
+    return rows
+
+
 if __name__ == "__main__":
     run()
+    run_benefit()

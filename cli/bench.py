@@ -188,6 +188,7 @@ def main(argv=None):
     from ..benchmarks import selection
     print("Selection heuristic (benchmarks/selection.py)")
     selection.run()
+    selection.run_benefit()
     try:
         from ..benchmarks import trace
     except ImportError:
