@@ -32,8 +32,8 @@ Cost
     effect's learned ms per ray and the residual; Q = 1 is the measured cost, a designer's Q
     scales it); the trace stage's fixed overhead is charged once; the time left is reduced by
     a margin, the 80th percentile of (measured - predicted) trace ms over the traced frames among
-    the last ``MARGIN_FRAMES`` frames (before any, the time left is divided by
-    ``UNMEASURED_MARGIN``; within -half..all of the time left): a prediction found too low is not
+    the last ``MARGIN_FRAMES`` frames (none without such frames: the cost model already
+    charges an effect never measured 1.5x its prior; within -half..all of the time left): a prediction found too low is not
     believed again after a few cheap frames, one found too high lets the time be filled.  The
     margin is additive (the trace stage's fixed work per light and layer is what the per-item
     costs miss, whatever is chosen), and it ages by frames, so a frame that traces nothing
@@ -63,7 +63,6 @@ SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
 MARGIN_FRAMES = 20
 MARGIN_QUANTILE = 80
-UNMEASURED_MARGIN = 1.5
 # Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
 # on any frame that traces an item never measured.
 MEASURE_EVERY = 2
@@ -107,8 +106,8 @@ class BenefitSelector:
     def margin_ms(self, available_ms: float) -> float:
         """What the time left loses to the predictions' recent errors (see the module docstring)."""
         recent = [error for frame, error in self.errors if frame > self.frames - MARGIN_FRAMES]
-        if not recent:
-            return available_ms - available_ms / UNMEASURED_MARGIN
+        if not recent:  # nothing measured lately: the cost model's own priors (margined) stand
+            return 0.0
         return float(np.clip(np.percentile(np.asarray(recent), MARGIN_QUANTILE), -0.5 * available_ms, available_ms))
 
     def per_pixel(self, names, priors: np.ndarray, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
