@@ -144,8 +144,11 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                                                 cost_spread_ms=np.array(spread, dtype=np.float64))
             measured.append(candidates)
             flips = {}
-            for budget, labels in budgets.items():
-                oracle_set = candidates.choose(oracle.nominal_time_left(budget, shared))
+            for labels in budgets.values():
+                # The group's key is rounded (to 0.1 ms): the oracle gets its runs' smallest exact budget,
+                # never more time than a run it judges had.
+                exact_budget = min(float(runs[label]["budget_ms"]) for label in labels)
+                oracle_set = candidates.choose(oracle.nominal_time_left(exact_budget, shared))
                 if oracle_set not in rendered:  # rendered and measured even when a run chose the same
                     image, stats, _ = renderer.render(frame, oracle_set)
                     rendered[oracle_set] = (image, item_measure.trace_ms(stats))
