@@ -249,7 +249,11 @@ def test_the_operator_reports_a_full_disk_and_keeps_a_partial_summary(files, run
 def test_a_signal_stops_the_replay_between_frames_and_keeps_everything_complete(files, runs, signal_name,
                                                                                  tmp_path):
     run_dir = tmp_path / "run"
-    process = subprocess.Popen([str(PHRT), "render", str(files / "path.blend"), "--out", str(run_dir)],
+    # At 960x720 the 40 frames take seconds: frames.csv's rows are read back once summary.json
+    # commits them (at most once a second), and at the scene's own size a fast machine had
+    # finished the replay by then (the process then ends 0, not interrupted).
+    process = subprocess.Popen([str(PHRT), "render", str(files / "path.blend"), "--out", str(run_dir),
+                                "--resolution", "960x720"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 300
