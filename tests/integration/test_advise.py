@@ -105,6 +105,20 @@ def test_benefit_per_ms_is_the_oracles_own_measurement_on_the_same_frames(advise
     assert np.isfinite(ratio) and ratio > 0
 
 
+def test_the_benefit_selections_shares_are_its_items(advised):
+    """The BENEFIT selection's choices fill benefit_share per item: with all the time there is, it
+    traces the mirror's reflection and the glass ball's refraction every visible frame, and never
+    the glass ball's shadow over nothing, which the paper's selection buys with the ball."""
+    _, _, _, written, rows = advised
+    assert "BENEFIT" in json.loads(open(written["json"], encoding="utf-8").read())["selections"]
+    share = {item: row["benefit_share"] for item, row in rows.items() if row["tagged"] == "1"}
+    assert all(value != "" for value in share.values()), share
+    assert float(share[("Mirror", "reflections")]) == 1.0
+    assert float(share[("GlassBall", "refractions")]) == 1.0
+    assert float(share[("GlassBall", "shadows")]) < float(rows[("GlassBall", "shadows")]["paper_share"]), rows[
+        ("GlassBall", "shadows")]
+
+
 def test_applying_recommendations_changes_exactly_their_properties_in_one_undoable_step(advised):
     """Last in this module: it changes the scene.  ``bpy.ops.ed.undo`` needs a window, which Blender
     as a module in background mode has none of (its poll fails: checked on bpy 5.0.1), so where it
@@ -133,17 +147,3 @@ def test_applying_recommendations_changes_exactly_their_properties_in_one_undoab
         for _ in range(4):
             bpy.ops.ed.undo()
         assert {name: item_measure.read_settings(bpy.data.objects[name]) for name in names} == before
-
-
-def test_the_benefit_selections_shares_are_its_items(advised):
-    """The BENEFIT selection's choices fill benefit_share per item: with all the time there is, it
-    traces the mirror's reflection and the glass ball's refraction every visible frame, and never
-    the glass ball's shadow over nothing, which the paper's selection buys with the ball."""
-    _, _, _, written, rows = advised
-    assert "BENEFIT" in json.loads(open(written["json"], encoding="utf-8").read())["selections"]
-    share = {item: row["benefit_share"] for item, row in rows.items() if row["tagged"] == "1"}
-    assert all(value != "" for value in share.values()), share
-    assert float(share[("Mirror", "reflections")]) == 1.0
-    assert float(share[("GlassBall", "refractions")]) == 1.0
-    assert float(share[("GlassBall", "shadows")]) < float(rows[("GlassBall", "shadows")]["paper_share"]), rows[
-        ("GlassBall", "shadows")]
