@@ -228,7 +228,7 @@ class FrameRenderer:
             "select_ms": select_ms, "trace_ms": trace_ms, "composite_ms": composite_ms,
             "budget_ms": selection.budget_ms, "predicted_trace_ms": float(selection.predicted_trace_ms),
             "n_candidates": int(np.sum(frame_elements.candidate)),
-            "n_visible": int(np.sum(np.asarray(selection.visible, bool))),
+            "n_visible": int(np.sum(np.asarray(selection.terms.visible, bool))),
             "n_selected": int(np.sum(selected)), "rays": counters.rays,
             "shadow_rays": counters.shadow_rays, "reflection_rays": counters.reflection_rays,
             "refraction_rays": counters.refraction_rays, "upload_ms": counters.upload_ms,

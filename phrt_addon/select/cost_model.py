@@ -353,7 +353,7 @@ class CostModel:
         expected_ms = float(np.sum(self._physical_ms(elements)[selected]))
         if expected_ms > 0:
             self._residual.update(trace_ms / expected_ms)
-        summed_cost = float(np.sum(np.asarray(result.cost)[selected]))
+        summed_cost = float(np.sum(np.asarray(result.C)[selected]))
         if summed_cost > 0:
             self._paper_ms_per_cost.update(trace_ms / summed_cost)
 

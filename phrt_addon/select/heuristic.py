@@ -28,14 +28,13 @@ Modes
 Node selection (V.C)
     Nodes are ordered by relevance R, highest first; ties go to the cheaper
     node, then to the lower element index (the engine keeps a stable element
-    order), so equal input gives equal output.  Phase 1 takes the first
-    ``n_parallel`` nodes in that order whose predicted cost fits the time still
-    left; phase 2 goes on down the order taking every node that still fits.  At
-    each step this is the paper's "most relevant node whose cost C is small
-    enough", because a node skipped earlier could not fit a larger remainder.
-    The phases select the same set as a single greedy pass; ``phase`` records
-    the batch so the engine can trace the N most relevant nodes first (one per
-    worker).  A node predicted at 0 ms always fits.  The predicted cost of the
+    order), so equal input gives equal output.  One greedy pass goes down that
+    order taking every node whose predicted cost still fits the time left: at
+    each step the paper's "most relevant node whose cost C is small enough",
+    because a node skipped earlier could not fit a larger remainder.  (The
+    paper's two phases, N nodes for its N stream processors and then the rest,
+    select the same set; the trace stage traces a frame's selection as one
+    batch, so no tracing order is kept.)  A node predicted at 0 ms always fits.  The predicted cost of the
     selection never exceeds T: both are summed in the same order.
 Relevance edges
     The paper links every node to all nodes of higher relevance: O(n^2) edges.
@@ -58,7 +57,7 @@ Hysteresis margin
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
 from functools import cached_property
 from itertools import compress
@@ -152,20 +151,19 @@ class SelectionGraph:
         source, target = np.nonzero(self.relevance[None, :] > self.relevance[:, None])
         return np.stack([self.nodes[source], self.nodes[target]], axis=1)
 
-    def select(self, time_left_ms: float, n_parallel: int) -> tuple[np.ndarray, np.ndarray, float]:
+    def select(self, time_left_ms: float) -> tuple[np.ndarray, float]:
         """Node selection of section V.C.
 
-        Returns (selected mask over nodes, phase per node: 1, 2 or 0 when not
-        selected, predicted ms of the selection <= time_left_ms).  O(n): the
+        Returns (selected mask over nodes, predicted ms of the selection <=
+        time_left_ms).  O(n): the
         prefix of the relevance order that fits is found with one cumulative
         sum; after it, a pass that stops when even the cheapest node still ahead
         no longer fits.
         """
         n = len(self)
         selected = np.zeros(n, dtype=bool)
-        phase = np.zeros(n, dtype=np.int8)
         if n == 0:
-            return selected, phase, 0.0
+            return selected, 0.0
         order = self.relevance_order
         costs = self.cost_ms[order]
         cumulative = np.cumsum(costs)
@@ -182,11 +180,8 @@ class SelectionGraph:
                 if spent + cost <= time_left_ms:
                     spent += cost
                     taken.append(position)
-        chosen = order[np.asarray(taken, dtype=np.int64)]
-        selected[chosen] = True
-        phase[chosen] = 2
-        phase[chosen[:n_parallel]] = 1
-        return selected, phase, spent
+        selected[order[np.asarray(taken, dtype=np.int64)]] = True
+        return selected, spent
 
 
 @dataclass
@@ -205,7 +200,6 @@ class SelectionResult:
     terms: ElementTerms
     selected: np.ndarray
     reason: list[str]
-    phase: np.ndarray
     predicted_ms: np.ndarray
     predicted_trace_ms: float
     time_left_ms: float
@@ -213,7 +207,6 @@ class SelectionResult:
     cost_mode: str
     selection_weight: float
     frame: int | None = None
-    trace_order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     budget_ms: float | None = None
     relevance_mode: str = "paper"
     order: str = "relevance"
@@ -235,11 +228,6 @@ class SelectionResult:
     S = property(lambda self: self.terms.previously_selected)
     K = property(lambda self: self.elements.priority)
     Q = property(lambda self: self.elements.rt_cost)
-    visible = property(lambda self: self.terms.visible)
-    cost = property(lambda self: self.terms.cost)
-    relevance = property(lambda self: self.terms.relevance)
-    visibility = property(lambda self: self.terms.visibility)
-    T = property(lambda self: self.time_left_ms)
 
     def selected_names(self) -> frozenset[str]:
         """The selection as names: next frame's S."""
@@ -252,7 +240,7 @@ class SelectionResult:
         as_int = lambda array: np.asarray(array, dtype=np.int64).tolist()  # noqa: E731
         as_float = lambda array: np.asarray(array, dtype=np.float64).tolist()  # noqa: E731
         columns = {
-            "frame": [frame] * n, "element": list(self.names), "visible": as_int(self.visible),
+            "frame": [frame] * n, "element": list(self.names), "visible": as_int(self.terms.visible),
             "A": as_float(self.A), "P": as_float(self.P), "D": as_float(self.D), "V": as_float(self.V),
             "Q": as_float(self.Q), "C": as_float(self.C), "K": as_float(self.K), "S": as_int(self.S),
             "R": as_float(self.R), "selected": as_int(self.selected), "reason": list(self.reason),
@@ -323,40 +311,40 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     if settings.mode == "HYBRID":
         eligible &= terms.within_area
     selected = np.zeros(n, dtype=bool)
-    phase = np.zeros(n, dtype=np.int8)
-    trace_order = np.zeros(0, dtype=np.int64)
     if settings.mode == "HYBRID":
         nodes = np.flatnonzero(eligible)
         graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes], settings.order)
         # The elements share what is left of T after the fixed part.
-        node_selected, node_phase, predicted_trace = graph.select(max(time_left - overhead, 0.0), settings.n_parallel)
+        node_selected, predicted_trace = graph.select(max(time_left - overhead, 0.0))
         if np.any(node_selected):
             predicted_trace += overhead
         selected[nodes] = node_selected
-        phase[nodes] = node_phase
-        trace_order = nodes[graph.relevance_order[node_selected[graph.relevance_order]]]
     elif settings.mode == "RAYTRACE":
         selected = eligible.copy()
-        phase[selected] = 1
-        trace_order = np.flatnonzero(selected)[np.lexsort((np.flatnonzero(selected), -terms.relevance[selected]))]
         predicted_trace = float(np.sum(predicted_ms[selected]))
         if np.any(selected):
             predicted_trace += overhead
     else:
         predicted_trace = 0.0
 
-    reason = np.full(n, "over_budget", dtype=object)
+    return SelectionResult(
+        elements=elements, terms=terms, selected=selected, reason=not_traced_reasons(terms, selected),
+        predicted_ms=predicted_ms, predicted_trace_ms=float(min(predicted_trace, MAX_PREDICTED_MS)),
+        time_left_ms=time_left, mode=settings.mode, cost_mode=settings.cost_mode,
+        selection_weight=settings.selection_weight, frame=frame,
+        budget_ms=budget_ms, relevance_mode=settings.relevance, order=settings.order,
+    )
+
+
+def not_traced_reasons(terms: ElementTerms, selected: np.ndarray) -> list[str]:
+    """Each element's ``reason`` (selection.csv): empty when selected, else the first of
+    not_candidate, not_visible, over_area that applies, else over_budget."""
+    reason = np.full(len(selected), "over_budget", dtype=object)
     reason[~terms.within_area] = "over_area"
     reason[~terms.visible] = "not_visible"
     reason[~terms.candidate] = "not_candidate"
-    reason[selected] = ""
-    return SelectionResult(
-        elements=elements, terms=terms, selected=selected, reason=reason.tolist(), phase=phase,
-        predicted_ms=predicted_ms, predicted_trace_ms=float(min(predicted_trace, MAX_PREDICTED_MS)),
-        time_left_ms=time_left, mode=settings.mode, cost_mode=settings.cost_mode,
-        selection_weight=settings.selection_weight, frame=frame, trace_order=trace_order,
-        budget_ms=budget_ms, relevance_mode=settings.relevance, order=settings.order,
-    )
+    reason[np.asarray(selected, bool)] = ""
+    return reason.tolist()
 
 
 def force_selection(result: SelectionResult, names) -> SelectionResult:
@@ -369,14 +357,5 @@ def force_selection(result: SelectionResult, names) -> SelectionResult:
     eligible = terms.candidate & terms.visible
     selected = eligible & np.fromiter((name in chosen for name in result.names), dtype=bool,
                                       count=len(result.names))
-    reason = np.full(len(result.names), "over_budget", dtype=object)
-    reason[~terms.within_area] = "over_area"
-    reason[~terms.visible] = "not_visible"
-    reason[~terms.candidate] = "not_candidate"
-    reason[selected] = ""
-    indices = np.flatnonzero(selected)
-    trace_order = indices[np.lexsort((indices, -terms.relevance[indices]))]
-    phase = np.where(selected, 1, 0).astype(np.int8)
-    return dataclass_replace(result, selected=selected, reason=reason.tolist(), phase=phase,
-                             trace_order=trace_order,
+    return dataclass_replace(result, selected=selected, reason=not_traced_reasons(terms, selected),
                              predicted_trace_ms=float(min(np.sum(result.predicted_ms[selected]), MAX_PREDICTED_MS)))

@@ -61,7 +61,6 @@ Budget as a fraction (``budget_at``)
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -170,9 +169,7 @@ class SelectionSettings:
     """The scene's settings of the heuristic (``Scene.phrt``), checked once.
 
     ``mode``, ``cost_mode``, ``relevance`` and ``order`` accept any case ('HYBRID',
-    'paper', 'PAPER'...).  ``n_parallel`` is the paper's N (GPU stream processors
-    there): the number of nodes of phase 1; None means the CPU worker threads
-    (``os.cpu_count()``).  ``budget_at`` (None or 0..1): see "Budget as a fraction".
+    'paper', 'PAPER'...).  ``budget_at`` (None or 0..1): see "Budget as a fraction".
     """
 
     budget_ms: float = defaults.BUDGET_MS
@@ -180,7 +177,6 @@ class SelectionSettings:
     max_area_fraction: float = defaults.MAX_AREA_FRACTION
     mode: str = "HYBRID"
     cost_mode: str = "measured"
-    n_parallel: int | None = None
     relevance: str = "paper"
     order: str = "relevance"
     budget_at: float | None = None
@@ -208,11 +204,6 @@ class SelectionSettings:
             setattr(self, name, value)
         self.budget_ms = min(self.budget_ms, MAX_PREDICTED_MS)
         self.selection_weight = min(self.selection_weight, MAX_SELECTION_WEIGHT)
-        if self.n_parallel is None:
-            self.n_parallel = os.cpu_count() or 1
-        self.n_parallel = int(self.n_parallel)
-        if self.n_parallel < 1:
-            raise ValueError(f"n_parallel must be >= 1, not {self.n_parallel}")
 
 
 @dataclass

@@ -16,7 +16,7 @@ def hysteresis_margin(result: SelectionResult) -> np.ndarray:
     """
     n = len(result.names)
     margin = np.full(n, UNBOUNDED_MARGIN)
-    competing = result.terms.candidate & result.visible & result.terms.within_area
+    competing = result.terms.candidate & result.terms.visible & result.terms.within_area
     nodes = np.flatnonzero(competing)
     if len(nodes) == 0 or result.mode != "HYBRID":
         return margin

@@ -136,17 +136,10 @@ def test_a_less_relevant_cheap_node_fills_the_time_an_expensive_one_cannot_use()
     assert result.predicted_trace_ms == 10.0
 
 
-def test_phase_one_takes_the_n_most_relevant_nodes_that_fit():
+def test_the_greedy_pass_goes_on_past_a_node_that_does_not_fit():
     elements = frame(5, distance=np.arange(1.0, 6.0))
-    result = select(elements, None, hybrid(n_parallel=2), time_left_ms=9,
-                    element_ms=np.array([3.0, 20.0, 3.0, 3.0, 1.0]))
-    assert result.phase.tolist() == [1, 0, 1, 2, 0]
-    assert result.trace_order.tolist() == [0, 2, 3]
-
-
-def test_n_parallel_defaults_to_the_cpu_worker_threads():
-    import os
-    assert SelectionSettings().n_parallel == (os.cpu_count() or 1)
+    result = select(elements, None, hybrid(), time_left_ms=9, element_ms=np.array([3.0, 20.0, 3.0, 3.0, 1.0]))
+    assert result.selected.tolist() == [True, False, True, True, False]
 
 
 def test_selection_graph_edges_follow_the_paper():
@@ -231,8 +224,7 @@ def test_unknown_mode_is_refused():
         SelectionSettings(mode="PATHTRACE")
 
 
-@pytest.mark.parametrize("field, value", [("budget_ms", -1.0), ("selection_weight", float("nan")),
-                                          ("n_parallel", 0)])
+@pytest.mark.parametrize("field, value", [("budget_ms", -1.0), ("selection_weight", float("nan"))])
 def test_nonsense_settings_are_refused(field, value):
     with pytest.raises(ValueError, match=field):
         SelectionSettings(**{field: value})
@@ -407,8 +399,7 @@ def previous_of(draw, n):
 @given(scenes(), st.data(), st.floats(0.0, 200.0), st.floats(0.0, 2.0), st.sampled_from(["paper", "MEASURED"]))
 def test_predicted_cost_of_the_selection_never_exceeds_the_time_left(scene, data, budget, weight, cost_mode):
     elements = FrameElements(**scene)
-    settings_ = hybrid(budget_ms=budget, selection_weight=weight, cost_mode=cost_mode,
-                       n_parallel=data.draw(st.integers(1, 4)))
+    settings_ = hybrid(budget_ms=budget, selection_weight=weight, cost_mode=cost_mode)
     result = select(elements, previous_of(data.draw, len(elements)), settings_, quick_model())
     assert result.predicted_trace_ms <= result.time_left_ms
     assert np.sum(result.predicted_ms[result.selected]) == pytest.approx(result.predicted_trace_ms, rel=1e-9)
@@ -499,12 +490,12 @@ def test_an_element_whose_visibility_changes_by_less_than_its_hysteresis_margin_
        st.sampled_from(schema.MODES))
 def test_equal_input_gives_equal_output(scene, data, budget, cost_mode, mode):
     previous = previous_of(data.draw, len(scene["names"]))
-    settings_ = SelectionSettings(budget_ms=budget, cost_mode=cost_mode, mode=mode, n_parallel=2)
+    settings_ = SelectionSettings(budget_ms=budget, cost_mode=cost_mode, mode=mode)
     first = select(FrameElements(**{k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in scene.items()}),
                    set(previous), settings_, quick_model())
     second = select(FrameElements(**scene), set(previous), settings_, quick_model())
     assert first.rows(5) == second.rows(5)
-    assert np.array_equal(first.phase, second.phase) and np.array_equal(first.trace_order, second.trace_order)
+    assert np.array_equal(first.selected, second.selected)
     assert first.predicted_trace_ms == second.predicted_trace_ms
 
 
