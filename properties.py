@@ -141,6 +141,13 @@ class PHRT_SceneSettings(bpy.types.PropertyGroup):
         items=_enum_items(schema.SELECTION_ITEMS),
         default="PAPER",
     )
+    quality_tiers: BoolProperty(
+        name="Quality Tiers",
+        description="With the Benefit selection, an effect may be ray traced at half or quarter of its pixels "
+                    "and the rest reconstructed from its neighbours (edge-aware), when that buys more within "
+                    "the frame's time than tracing it fully or not at all",
+        default=False,
+    )
     relevance: EnumProperty(
         name="Relevance",
         description="What the heuristic's relevance R weighs: the paper's visibility, or visibility times "

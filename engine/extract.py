@@ -174,7 +174,8 @@ def read_settings(scene) -> Settings:
                     cost_mode=props.cost_mode, shadow_map_size=int(props.shadow_map_size),
                     budget_at=float(props.budget_at) if props.use_budget_at else None,
                     relevance=props.relevance, selection_order=props.selection_order,
-                    selection=getattr(props, "selection", "PAPER"))
+                    selection=getattr(props, "selection", "PAPER"),
+                    quality_tiers=bool(getattr(props, "quality_tiers", False)))
 
 
 def resolution(scene):

@@ -40,6 +40,9 @@ class PHRT_PT_render(bpy.types.Panel):
             row.prop(settings, "budget_ms", text="Budget (ms)")
             row.label(text=frame_rate_text(settings.budget_ms))
         column.prop(settings, "selection")
+        tiers = column.row()
+        tiers.active = settings.selection == "BENEFIT"
+        tiers.prop(settings, "quality_tiers")
         paper = column.column()
         paper.active = settings.selection == "PAPER"  # the paper's knobs; BENEFIT has its own terms
         paper.prop(settings, "selection_weight", text="Selection Weight I")

@@ -154,7 +154,7 @@ class FrameRenderer:
         if use_benefit and self.forced_selection is None:
             item_priors = item_benefit.priors(layers, n_elements, flags, materials)
             choice, selection = self._choose_items(selection, frame_elements, item_priors, area_px, footprint,
-                                                   effect_rays)
+                                                   effect_rays, tiers=bool(getattr(settings, "quality_tiers", False)))
         if self.forced_selection is not None:
             selection = heuristic.force_selection(selection, self.forced_selection)
         selected = np.asarray(selection.selected, bool)
@@ -169,7 +169,8 @@ class FrameRenderer:
                 layers = read_layers()
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
-                                                effects=selection.effects)
+                                                effects=selection.effects,
+                                                rates=choice.rates if choice is not None else None)
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
 
@@ -186,6 +187,9 @@ class FrameRenderer:
         # The first draw of a lighting/composite configuration compiles its shaders (one-time).
         shade_setup_ms = float(raster.stats.get("shade_setup_ms", 0.0))
         passes = self._passes(snapshot, raster, combined, selected, candidate)
+        # PHRT Rate: per pixel the rate its traced terms came at (0: raster), rows bottom to top.
+        passes.rate = traced_frame.rate if traced_frame.rate is not None else \
+            np.zeros((raster.height, raster.width), np.float32)
 
         if choice is not None:
             start = _timer()
@@ -240,7 +244,7 @@ class FrameRenderer:
                            selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
 
     # ------------------------------------------------------------------
-    def _choose_items(self, selection, frame_elements, priors, area_px, footprint, effect_rays):
+    def _choose_items(self, selection, frame_elements, priors, area_px, footprint, effect_rays, tiers=False):
         """The BENEFIT selection of this frame: (ItemChoice, the SelectionResult it becomes).  The
         result keeps the paper's terms for the log; its elements' effect flags and rays per pixel
         are those traced, which the cost model learns from."""
@@ -257,7 +261,7 @@ class FrameRenderer:
             refractions=flags[:, 2] if j == 2 else none, rays_per_pixel=effect_rays[:, j]), terms.cost, "measured")
             for j in range(3)], axis=1)
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
-                                              cost_ms, selection.time_left_ms, overhead)
+                                              cost_ms, selection.time_left_ms, overhead, tiers=tiers)
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)
@@ -266,9 +270,8 @@ class FrameRenderer:
         as_traced = dataclass_replace(
             frame_elements, shadows=traced_flags[:, 0], reflections=traced_flags[:, 1],
             refractions=traced_flags[:, 2], rays_per_pixel=np.sum(effect_rays * traced_flags, axis=1))
-        predicted = np.where(selected, np.sum(np.where(chosen, choice.cost_ms, 0.0), axis=1),
-                             np.sum(choice.cost_ms, axis=1))
-        trace = float(np.sum(choice.cost_ms[chosen])) + (overhead if np.any(selected) else 0.0)
+        predicted = np.where(selected, np.sum(choice.chosen_cost_ms, axis=1), np.sum(choice.cost_ms, axis=1))
+        trace = float(np.sum(choice.chosen_cost_ms)) + (overhead if np.any(selected) else 0.0)
         return choice, dataclass_replace(
             forced, elements=as_traced, predicted_ms=predicted, predicted_trace_ms=trace,
             effects=choice.effects, benefit_estimate=np.sum(choice.value, axis=1))

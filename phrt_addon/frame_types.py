@@ -58,6 +58,7 @@ class FramePasses:
     selected: np.ndarray  # (h,w) float32, 1 where the front element was ray traced
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
     element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
+    rate: np.ndarray | None = None  # (h,w) float32, rate of the traced terms (1, 0.5, 0.25; 0: raster)
 
 
 @dataclass

@@ -62,10 +62,11 @@ PASSES = (
     ("PHRT Selected", 1, "X", "VALUE"),  # 1 where the front element was ray traced this frame
     ("PHRT Candidate", 1, "X", "VALUE"),  # 1 on every candidate element's pixels
     (ELEMENT_PASS, 1, "X", "VALUE"),  # front element index + 1, 0 where none (popping, report)
+    ("PHRT Rate", 1, "X", "VALUE"),  # the rate the pixel's traced terms came at (1, 0.5, 0.25), 0: raster
 )
 # Pass name -> attribute of ``frame.FramePasses``.
 PASS_FIELDS = {COMBINED_PASS: "combined", DEPTH_PASS: "depth", "Normal": "normal", "PHRT Selected": "selected",
-               "PHRT Candidate": "candidate", ELEMENT_PASS: "element"}
+               "PHRT Candidate": "candidate", ELEMENT_PASS: "element", "PHRT Rate": "rate"}
 
 # -- a run directory (docs/formats.md) ---------------------------------------------------
 FRAMES_CSV = "frames.csv"

@@ -64,7 +64,7 @@ DEFAULT_BUDGETS = 5
 # The baseline is the paper's heuristic with the engine's measured cost model; each other
 # variant changes one knob.  Keys are the Scene.phrt settings a replay overrides.
 BASELINE = {"cost_mode": "MEASURED", "selection_weight": defaults.SELECTION_WEIGHT,
-            "selection_order": "RELEVANCE", "relevance": "PAPER", "selection": "PAPER"}
+            "selection_order": "RELEVANCE", "relevance": "PAPER", "selection": "PAPER", "quality_tiers": False}
 VARIANTS = {
     "measured": {},
     "papercost": {"cost_mode": "PAPER"},
@@ -73,6 +73,7 @@ VARIANTS = {
     "rperms": {"selection_order": "RELEVANCE_PER_MS"},
     "error": {"relevance": "ERROR"},
     "benefit": {"selection": "BENEFIT"},
+    "tiers": {"selection": "BENEFIT", "quality_tiers": True},
 }
 
 

@@ -194,6 +194,7 @@ class Settings:
     relevance: str = "PAPER"  # 'PAPER' (equation 3) or 'ERROR' (V x expected benefit, see heuristic.py)
     selection_order: str = "RELEVANCE"  # 'RELEVANCE' (the paper's) or 'RELEVANCE_PER_MS'
     selection: str = "PAPER"  # 'PAPER' (heuristic.py) or 'BENEFIT' (select/benefit_selection.py)
+    quality_tiers: bool = False  # BENEFIT may trace an item at half or quarter rate (issue 23)
 
 
 @dataclass

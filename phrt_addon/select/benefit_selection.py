@@ -61,6 +61,13 @@ ADD_SLACK = 0.25
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
+# Quality tiers (issue 23): the rates an item may be traced at, the share of its full-rate
+# benefit each keeps and the share of its full-rate cost each takes (rays scale; the edge-aware
+# reconstruction does not: priors from the reconstruction's measurements, tests/core/test_trace_rates.py
+# and trace/rates.py, not learned per item yet).
+TIER_RATES = (1.0, 0.5, 0.25)
+TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
+TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
 MARGIN_FRAMES = 20
 MARGIN_QUANTILE = 80
 # Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
@@ -80,6 +87,14 @@ class ItemChoice:
     per_pixel: np.ndarray     # (n, 3) the per-pixel estimate used
     capacity_ms: float        # the time the knapsack filled (T less overhead, less the margin)
     margin_ms: float
+    rate: np.ndarray = None   # (n, 3) the rate each item is traced at (0: not traced)
+    chosen_cost_ms: np.ndarray = None  # (n, 3) predicted ms of the chosen items at their rate
+
+    @property
+    def rates(self) -> dict[str, np.ndarray]:
+        """Per effect name, each element's rate (``TraceStage.run(rates=...)``; 1.0 where not traced)."""
+        return {effect: np.where(self.rate[:, index] > 0, self.rate[:, index], 1.0)
+                for index, effect in enumerate(EFFECTS)}
 
     @property
     def effects(self) -> dict[str, np.ndarray]:
@@ -99,6 +114,7 @@ class BenefitSelector:
         self.observations: dict[tuple[str, str], int] = {}
         self.waited: dict[tuple[str, str], int] = {}
         self.previous: set[tuple[str, str]] = set()
+        self.previous_rate: dict[tuple[str, str], float] = {}
         self.errors: deque = deque(maxlen=MARGIN_FRAMES)  # (frame count, measured - predicted ms)
         self.frames = 0
 
@@ -122,9 +138,11 @@ class BenefitSelector:
                     fresh[i, j] = False
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
-    def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms) -> ItemChoice:
+    def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
+               tiers: bool = False) -> ItemChoice:
         """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
-        ``cost_ms`` each item's predicted ms (the cost model's, Q included)."""
+        ``cost_ms`` each item's predicted ms at full rate (the cost model's, Q included).
+        ``tiers``: each item may be bought at full, half or quarter rate (``TIER_RATES``)."""
         eligible = np.asarray(eligible, bool)
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
@@ -147,11 +165,45 @@ class BenefitSelector:
             total = float(adjusted[eligible].sum()) + 1e-12
             adjusted = adjusted + np.where(explore, total * np.minimum((waited + 1) / EXPLORE_FRAMES, 1.0), 0.0)
         charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
-        flat = knapsack.solve(np.where(eligible, adjusted, 0.0).ravel(), np.where(eligible, charged, np.inf).ravel(),
-                              capacity)
-        chosen = flat.reshape(eligible.shape) & eligible
+        rate = np.zeros(eligible.shape)
+        if tiers:
+            rate = self._choose_rates(names, eligible, value, adjusted - np.where(was, value * (1.0 + SWITCH),
+                                                                                   value * (1.0 - SWITCH)),
+                                      was, cost, capacity)
+            chosen = rate > 0
+        else:
+            flat = knapsack.solve(np.where(eligible, adjusted, 0.0).ravel(),
+                                  np.where(eligible, charged, np.inf).ravel(), capacity)
+            chosen = flat.reshape(eligible.shape) & eligible
+            rate[chosen] = 1.0
+        spent = np.where(chosen, cost * np.vectorize(lambda r: TIER_COST.get(r, 0.0))(rate), 0.0)
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
-                          per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin)
+                          per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin, rate=rate,
+                          chosen_cost_ms=spent)
+
+    def _choose_rates(self, names, eligible, value, bonus, was, cost, capacity) -> np.ndarray:
+        """(n, 3) rate per item (0: not traced) by the multiple-choice knapsack over TIER_RATES:
+        an option's value is the item's value x TIER_KEEP, its cost the full cost x TIER_COST; the
+        switching cost counts a change of rate like a change of state; shadows only at full rate."""
+        items = np.argwhere(eligible)
+        n_options = len(TIER_RATES)
+        values = np.zeros((len(items), n_options))
+        costs = np.full((len(items), n_options), np.inf)
+        for row, (i, j) in enumerate(items.tolist()):
+            before = self.previous_rate.get((names[i], EFFECTS[j]), 0.0)
+            for option, tier in enumerate(TIER_RATES):
+                if EFFECTS[j] == "shadows" and tier < 1.0:
+                    continue
+                same = was[i, j] and before == tier
+                factor = (1.0 + SWITCH) if same else (1.0 if was[i, j] else 1.0 - SWITCH)
+                values[row, option] = value[i, j] * TIER_KEEP[tier] * factor + bonus[i, j]
+                costs[row, option] = cost[i, j] * TIER_COST[tier] * (1.0 if same else 1.0 + ADD_SLACK)
+        picked = knapsack.solve_choices(values, costs, capacity)
+        rate = np.zeros(eligible.shape)
+        for row, option in enumerate(picked.tolist()):
+            if option >= 0:
+                rate[tuple(items[row])] = TIER_RATES[option]
+        return rate
 
     # -- learning ------------------------------------------------------------------
     def observe(self, names, choice: ItemChoice, priors, measured=None, pixels=None) -> None:
@@ -159,13 +211,16 @@ class BenefitSelector:
         not measured), ``pixels`` (n, 3) the pixels each item covers (its divisor)."""
         chosen = choice.chosen
         self.previous = {(names[i], EFFECTS[j]) for i, j in zip(*np.nonzero(chosen))}
+        self.previous_rate = {(names[i], EFFECTS[j]): float(choice.rate[i, j]) for i, j in zip(*np.nonzero(chosen))}
         for i, name in enumerate(names):
             for j, effect in enumerate(EFFECTS):
                 key = (name, effect)
                 if not choice.eligible[i, j]:
                     continue
                 if chosen[i, j] and measured is not None and pixels is not None and pixels[i, j] > 0:
-                    value = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j]), 0.0, MAX_VALUE))
+                    # What a reduced rate changed, as the full rate's estimate (its share TIER_KEEP).
+                    keep = TIER_KEEP.get(float(choice.rate[i, j]), 1.0) if choice.rate is not None else 1.0
+                    value = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j] / keep), 0.0, MAX_VALUE))
                     old = self.estimates.get(key)
                     self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
                     self.observations[key] = self.observations.get(key, 0) + 1

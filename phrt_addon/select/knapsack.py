@@ -113,3 +113,55 @@ def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
     else:
         chosen[useful[picked]] = True
     return chosen
+
+
+def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
+    """Multiple-choice knapsack: per item (row) at most one option (column), the largest summed
+    value within ``capacity``.  Returns the chosen option per item, -1 for none.  Costs rounded
+    up to bins of T as in :func:`solve` (never over T); exact for the rounded costs; compared
+    with the best single (item, option) that fits."""
+    values = np.atleast_2d(_finite(values, nan=0.0).reshape(np.shape(values)))
+    costs = np.atleast_2d(_finite(costs, nan=LARGE).reshape(np.shape(values)))
+    n_items, n_options = values.shape
+    choice = np.full(n_items, -1, np.int64)
+    capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=LARGE))
+    if n_items == 0 or n_options == 0 or capacity < 0:
+        return choice
+    if capacity == 0:  # only free options: the most valuable of each item
+        free = np.where((costs <= 0) & (values > 0), values, -np.inf)
+        return np.where(np.isfinite(free.max(axis=1)), np.argmax(free, axis=1), -1).astype(np.int64)
+    usable = (values > 0) & (costs <= capacity)
+    rows = np.flatnonzero(usable.any(axis=1))
+    if len(rows) == 0:
+        return choice
+    n_bins = bins_for(len(rows), bins)
+    width = capacity / n_bins
+    if not width > 0:
+        return choice
+    with np.errstate(over="ignore", divide="ignore"):
+        weights = np.minimum(costs / width, n_bins + 1.0)
+    weights = np.ceil(weights * (1.0 - 1e-9)).astype(np.int64)  # 0 only for a free option
+    best = np.zeros(n_bins + 1)
+    took = np.full((len(rows), n_bins + 1), -1, np.int8 if n_options < 127 else np.int64)
+    for position, row in enumerate(rows):
+        new = best.copy()
+        for option in np.flatnonzero(usable[row]).tolist():
+            weight = int(weights[row, option])
+            candidate = best[:n_bins + 1 - weight] + values[row, option]
+            segment = new[weight:]
+            better = candidate > segment
+            segment[better] = candidate[better]
+            took[position, weight:][better] = option
+        best = new
+    remaining = n_bins
+    for position in range(len(rows) - 1, -1, -1):
+        option = int(took[position, remaining])
+        if option >= 0:
+            choice[rows[position]] = option
+            remaining -= int(weights[rows[position], option])
+    flat = np.where(usable, values, -np.inf).ravel()
+    single = int(np.argmax(flat))
+    if flat[single] > float(sum(values[i, o] for i, o in enumerate(choice) if o >= 0)):
+        choice[:] = -1
+        choice[single // n_options] = single % n_options
+    return choice

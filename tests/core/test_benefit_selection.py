@@ -139,3 +139,34 @@ def test_the_mirror_outranks_the_matte_reflection_from_the_first_frame():
     per_pixel_mirror = value[0] / max(result.selection.elements.area_px[0], 1)
     per_pixel_block = value[1] / max(result.selection.elements.area_px[1], 1)
     assert per_pixel_mirror > 5 * per_pixel_block
+
+
+def test_with_tiers_an_item_that_does_not_fit_at_full_rate_is_bought_at_a_lower_one():
+    # Full costs 10 ms; a new item is charged 1.25x: full 12.5, half 11.25, quarter 8.75 ms.
+    def choice_at(time_left, tiers=True):
+        selector = BenefitSelector()
+        selector.observe_time(1.0, 1.0)
+        return selector.choose(["Mirror"], np.array([[False, True, False]]), np.array([[0, 500, 0]]),
+                               np.array([[0, 0.4, 0]]), np.ones(1), np.array([[0, 10.0, 0]]), time_left, 0.0,
+                               tiers=tiers)
+    assert not choice_at(8.0).chosen.any()
+    quarter = choice_at(9.5)
+    assert quarter.rate[0, 1] == 0.25 and quarter.rates["reflections"][0] == 0.25
+    assert quarter.chosen_cost_ms[0, 1] == pytest.approx(10.0 * benefit_selection.TIER_COST[0.25])
+    assert choice_at(12.0).rate[0, 1] == 0.5
+    assert choice_at(13.0).rate[0, 1] == 1.0
+    assert not choice_at(12.0, tiers=False).chosen.any()  # all or nothing: nothing
+
+
+def test_a_frame_with_tiers_traces_at_the_chosen_rate_and_writes_the_rate_pass():
+    snapshot = mirror_scene("HYBRID")
+    snapshot.settings.selection = "BENEFIT"
+    snapshot.settings.quality_tiers = True
+    result, _, renderer = render(snapshot)
+    rate = result.passes.rate
+    assert rate.shape == result.passes.depth.shape and np.isfinite(rate).all()
+    chosen = result.selection.effects
+    assert chosen["reflections"][0]  # the mirror, all the time there is: at full rate
+    assert set(np.unique(rate)) <= {0.0, 0.25, 0.5, 1.0} and (rate == 1.0).any()
+    # The mirror (element index 0: pass value 1) was traced at full rate on every pixel it traced.
+    assert rate[(result.passes.element == 1) & (rate > 0)].min() == 1.0

@@ -67,3 +67,42 @@ def test_the_core_of_a_large_instance_is_close_to_the_exact_programme():
     # The core solution is within 0.5% of the ratio greedy's value (measured 0.998 on this
     # instance: the core's costs are rounded to bins, the greedy's prefix is not).
     assert values[large].sum() >= values[greedy].sum() * 0.995
+
+
+choice_instances = st.integers(1, 6).flatmap(lambda n: st.tuples(
+    st.lists(st.lists(st.floats(0.0, 10.0), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.lists(st.lists(st.floats(0.0, 20.0), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.floats(0.0, 60.0)))
+
+
+def brute_force_choices(values, costs, capacity):
+    best = 0.0
+    for picks in product(range(-1, values.shape[1]), repeat=len(values)):
+        cost = sum(costs[i, o] for i, o in enumerate(picks) if o >= 0)
+        value = sum(values[i, o] for i, o in enumerate(picks) if o >= 0)
+        if cost <= capacity and value > best:
+            best = value
+    return best
+
+
+@settings(max_examples=200, deadline=None)
+@given(choice_instances)
+def test_multiple_choice_never_over_capacity_and_optimal_within_the_rounding(instance):
+    values, costs, capacity = np.array(instance[0]), np.array(instance[1]), instance[2]
+    choice = knapsack.solve_choices(values, costs, capacity)
+    picked = [(i, o) for i, o in enumerate(choice.tolist()) if o >= 0]
+    assert sum(costs[i, o] for i, o in picked) <= capacity * (1 + 1e-8)
+    got = sum(values[i, o] for i, o in picked)
+    optimum = brute_force_choices(values, costs, capacity)
+    shrunk = brute_force_choices(values, costs, capacity * (1.0 - len(values) / knapsack.bins_for(len(values))))
+    assert shrunk - 1e-9 <= got <= optimum + 1e-9
+    assert got >= optimum / 2 - 1e-9
+
+
+def test_multiple_choice_takes_a_cheaper_rate_when_full_does_not_fit():
+    # One item: full (value 10, cost 8), half (8.5, 4.4), quarter (6.5, 2.6); T = 5: half.
+    choice = knapsack.solve_choices([[10.0, 8.5, 6.5]], [[8.0, 4.4, 2.6]], 5.0)
+    assert choice.tolist() == [1]
+    # Two such items in T = 8: both at quarter/half beat one at full.
+    choice = knapsack.solve_choices([[10.0, 8.5, 6.5]] * 2, [[8.0, 4.4, 2.6]] * 2, 8.0)
+    assert sorted(choice.tolist()) == [1, 2]
