@@ -110,7 +110,12 @@ class FrameRenderer:
             return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
                     "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
 
-        if learn_benefit or use_benefit:  # the benefit priors read the materials under each element's pixels
+        # The benefit priors read the materials under each element's pixels: under BENEFIT only when an
+        # item visible now has no prior yet, or the cached ones are PRIOR_EVERY frames old (a frame
+        # that traces reads the layers anyway, after the selection).
+        need_priors = use_benefit and self.benefit_selector.needs_priors(
+            [e.name for e in snapshot.elements], candidate & (area_px > 0))
+        if learn_benefit or need_priors:
             start = _timer()
             layers = read_layers()
             readback_ms = _ms(start)
@@ -152,7 +157,8 @@ class FrameRenderer:
             raster_ms=max(raster_ms - raster.setup_ms, 0.0))
         choice = item_priors = None
         if use_benefit and self.forced_selection is None:
-            item_priors = item_benefit.priors(layers, n_elements, flags, materials)
+            item_priors = self.benefit_selector.priors(
+                frame_elements.names, item_benefit.priors(layers, n_elements, flags, materials) if need_priors else None)
             choice, selection = self._choose_items(selection, frame_elements, item_priors, area_px, footprint,
                                                    effect_rays, tiers=bool(getattr(settings, "quality_tiers", False)))
         if self.forced_selection is not None:

@@ -73,6 +73,9 @@ MARGIN_QUANTILE = 80
 # Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
 # on any frame that traces an item never measured.
 MEASURE_EVERY = 2
+# The material priors are recomputed (the layers read before the selection) every PRIOR_EVERY
+# frames, and on any frame with a visible candidate that has none yet.
+PRIOR_EVERY = 8
 MAX_VALUE = 1e15
 
 
@@ -115,6 +118,8 @@ class BenefitSelector:
         self.waited: dict[tuple[str, str], int] = {}
         self.previous: set[tuple[str, str]] = set()
         self.previous_rate: dict[tuple[str, str], float] = {}
+        self.prior_cache: dict[str, np.ndarray] = {}  # element name -> (3,) its last computed priors
+        self.priors_at = None  # self.frames when the priors were last computed
         self.errors: deque = deque(maxlen=MARGIN_FRAMES)  # (frame count, measured - predicted ms)
         self.frames = 0
 
@@ -230,6 +235,23 @@ class BenefitSelector:
                     self.estimates[key] += DECAY * (prior - self.estimates[key])
                 else:
                     self.waited[key] = self.waited.get(key, 0) + 1
+
+    def needs_priors(self, names, visible_candidates) -> bool:
+        """Whether this frame must compute the material priors (read the layers before the
+        selection): a visible candidate has none cached, or they are PRIOR_EVERY frames old."""
+        if self.priors_at is None or self.frames - self.priors_at >= PRIOR_EVERY:
+            return bool(np.any(visible_candidates))
+        return any(names[i] not in self.prior_cache for i in np.flatnonzero(visible_candidates))
+
+    def priors(self, names, computed=None) -> np.ndarray:
+        """(n, 3) priors: ``computed`` this frame (and cached), else the cached ones (0 where none)."""
+        if computed is not None:
+            computed = np.asarray(computed, np.float64)
+            self.prior_cache.update({name: computed[i].copy() for i, name in enumerate(names)})
+            self.priors_at = self.frames
+            return computed
+        zero = np.zeros(len(EFFECTS))
+        return np.array([self.prior_cache.get(name, zero) for name in names], np.float64).reshape(len(names), 3)
 
     def wants_measurement(self, names, choice: ItemChoice, frame_index: int) -> bool:
         if frame_index % MEASURE_EVERY == 0:

@@ -170,3 +170,18 @@ def test_a_frame_with_tiers_traces_at_the_chosen_rate_and_writes_the_rate_pass()
     assert set(np.unique(rate)) <= {0.0, 0.25, 0.5, 1.0} and (rate == 1.0).any()
     # The mirror (element index 0: pass value 1) was traced at full rate on every pixel it traced.
     assert rate[(result.passes.element == 1) & (rate > 0)].min() == 1.0
+
+
+def test_the_material_priors_are_computed_only_when_an_item_has_none_or_they_are_old():
+    selector = BenefitSelector()
+    visible = np.array([True, False])
+    assert selector.needs_priors(["A", "B"], visible)
+    priors = selector.priors(["A", "B"], np.array([[0.0, 0.3, 0.0], [0.02, 0.0, 0.0]]))
+    assert priors[0, 1] == 0.3
+    selector.frames += 1
+    assert not selector.needs_priors(["A", "B"], visible)
+    assert selector.priors(["A", "B"])[1, 0] == 0.02  # cached
+    assert selector.needs_priors(["A", "C"], np.array([False, True]))  # C has none
+    selector.frames += benefit_selection.PRIOR_EVERY
+    assert selector.needs_priors(["A", "B"], visible)  # old
+    assert not selector.needs_priors(["A", "B"], np.array([False, False]))  # nothing visible: nothing to read
