@@ -34,6 +34,7 @@ from . import extract, final, session
 # not candidates get no box: the overlay shows what the designer tagged.
 OVERLAY_PALETTE = {
     "selected": (0.20, 0.90, 0.30, 1.0),
+    "reduced_rate": (0.85, 0.95, 0.20, 1.0),
     "over_budget": (1.00, 0.55, 0.10, 1.0),
     "over_area": (0.70, 0.30, 1.00, 1.0),
     "not_visible": (0.50, 0.50, 0.50, 1.0),
@@ -41,6 +42,7 @@ OVERLAY_PALETTE = {
 # Legend entries for the panel: (decision, label, Blender icon of a matching colour).
 OVERLAY_LEGEND = (
     ("selected", "Ray traced", "STRIP_COLOR_04"),
+    ("reduced_rate", "Traced at half/quarter rate", "STRIP_COLOR_03"),
     ("over_budget", "Over budget", "STRIP_COLOR_02"),
     ("over_area", "Over area", "STRIP_COLOR_06"),
     ("not_visible", "Not visible", "STRIP_COLOR_09"),
@@ -54,7 +56,8 @@ def decision(row) -> str | None:
     """The overlay decision of one selection row: a key of OVERLAY_PALETTE, or None
     for a non-candidate (or a row with an unknown reason)."""
     if bool(row.get("selected")):
-        return "selected"
+        rate = row.get("rate")
+        return "reduced_rate" if rate is not None and rate != "" and 0 < float(rate) < 1 else "selected"
     reason = row.get("reason") or ""
     return reason if reason in OVERLAY_PALETTE else None
 

@@ -280,7 +280,8 @@ class FrameRenderer:
         trace = float(np.sum(choice.chosen_cost_ms)) + (overhead if np.any(selected) else 0.0)
         return choice, dataclass_replace(
             forced, elements=as_traced, predicted_ms=predicted, predicted_trace_ms=trace,
-            effects=choice.effects, benefit_estimate=np.sum(choice.value, axis=1))
+            effects=choice.effects, benefit_estimate=np.sum(choice.value, axis=1),
+            item_rate=np.where(selected, np.min(np.where(chosen, choice.rate, np.inf), axis=1), 0.0))
 
     @staticmethod
     def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:

@@ -214,6 +214,8 @@ class SelectionResult:
     # tagged effect of a selected element), and each element's summed item value.
     effects: dict | None = None
     benefit_estimate: np.ndarray | None = None
+    # BENEFIT: per element the lowest rate its traced effects came at (1: full, 0: not traced).
+    item_rate: np.ndarray | None = None
 
     @property
     def names(self) -> list[str]:
@@ -250,6 +252,8 @@ class SelectionResult:
             columns["benefit"] = as_float(self.benefit_estimate)
             columns["effects"] = [";".join(effect for effect in sorted(self.effects) if self.effects[effect][i])
                                   for i in range(n)]
+            if self.item_rate is not None:
+                columns["rate"] = as_float(self.item_rate)
         elif self.terms.weighted_visibility is not None:
             columns["benefit"] = as_float(self.terms.weighted_visibility)
         return columns
@@ -260,7 +264,8 @@ class SelectionResult:
         the ``error`` relevance, or under the BENEFIT selection the element's summed item value
         with ``effects``, the effects traced (``;``-separated)."""
         columns = self.columns(frame)
-        keys = SELECTION_COLUMNS + tuple(key for key in ("predicted_ms", "benefit", "effects") if key in columns)
+        keys = SELECTION_COLUMNS + tuple(key for key in ("predicted_ms", "benefit", "effects", "rate")
+                                         if key in columns)
         return [dict(zip(keys, values)) for values in zip(*(columns[key] for key in keys))]
 
 

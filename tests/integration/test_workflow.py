@@ -619,9 +619,13 @@ def test_overlay_colors_follow_the_last_decisions():
         {"element": "Wall", "selected": 0, "reason": "over_area"},
         {"element": "Lamp@Set:3", "selected": 0, "reason": "not_visible"},
         {"element": "Floor", "selected": 0, "reason": "not_candidate"},
+        {"element": "Puddle", "selected": 1, "reason": "", "rate": 0.25},  # quality tiers: a quarter
+        {"element": "Chrome", "selected": 1, "reason": "", "rate": 1.0},
     ]
     colors = viewport.overlay_colors(rows)
     assert colors == {"Mirror": viewport.OVERLAY_PALETTE["selected"],
+                      "Puddle": viewport.OVERLAY_PALETTE["reduced_rate"],
+                      "Chrome": viewport.OVERLAY_PALETTE["selected"],
                       "Glass/Glass": viewport.OVERLAY_PALETTE["over_budget"],
                       "Wall": viewport.OVERLAY_PALETTE["over_area"],
                       "Lamp@Set:3": viewport.OVERLAY_PALETTE["not_visible"]}
