@@ -66,13 +66,10 @@ def _binned(values, costs, capacity, bins) -> np.ndarray:
     if capacity <= 0 or len(values) == 0:
         return np.zeros(len(values), dtype=bool)
     n_bins = bins_for(len(values), bins)
-    width = capacity / n_bins
-    if not width > 0:  # a capacity too small to split
-        return np.zeros(len(values), dtype=bool)
     # Rounded up (less a relative 1e-9 that float division adds to whole bins): a chosen set of
-    # rounded cost <= n_bins has true cost <= capacity.
-    with np.errstate(over="ignore", divide="ignore"):
-        in_bins = np.minimum(costs / width, n_bins + 1.0)
+    # rounded cost <= n_bins has true cost <= capacity.  Divided by T first (T may be subnormal).
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        in_bins = np.nan_to_num(np.minimum(costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
     weights = np.maximum(np.ceil(in_bins * (1.0 - 1e-9)), 1).astype(np.int64)
     return _dynamic_programme(values, weights, n_bins)
 
@@ -127,19 +124,17 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarr
     capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=LARGE))
     if n_items == 0 or n_options == 0 or capacity < 0:
         return choice
+    free = np.where((costs <= 0) & (values > 0), values, -np.inf)
+    free_choice = np.where(np.isfinite(free.max(axis=1)), np.argmax(free, axis=1), -1).astype(np.int64)
     if capacity == 0:  # only free options: the most valuable of each item
-        free = np.where((costs <= 0) & (values > 0), values, -np.inf)
-        return np.where(np.isfinite(free.max(axis=1)), np.argmax(free, axis=1), -1).astype(np.int64)
+        return free_choice
     usable = (values > 0) & (costs <= capacity)
     rows = np.flatnonzero(usable.any(axis=1))
     if len(rows) == 0:
         return choice
     n_bins = bins_for(len(rows), bins)
-    width = capacity / n_bins
-    if not width > 0:
-        return choice
-    with np.errstate(over="ignore", divide="ignore"):
-        weights = np.minimum(costs / width, n_bins + 1.0)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # in bins of T (T may be subnormal)
+        weights = np.nan_to_num(np.minimum(costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
     weights = np.ceil(weights * (1.0 - 1e-9)).astype(np.int64)  # 0 only for a free option
     best = np.zeros(n_bins + 1)
     took = np.full((len(rows), n_bins + 1), -1, np.int8 if n_options < 127 else np.int64)
