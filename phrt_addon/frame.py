@@ -28,10 +28,9 @@ selected element means no Embree work at all.
 from __future__ import annotations
 
 import time
+from dataclasses import replace as dataclass_replace
 
 import numpy as np
-
-from dataclasses import replace as dataclass_replace
 
 from .select import benefit, benefit_selection, heuristic, item_benefit
 from .select import selection_terms
@@ -156,11 +155,12 @@ class FrameRenderer:
             # The time left is measured after this frame's raster half, not predicted for it.
             raster_ms=max(raster_ms - raster.setup_ms, 0.0))
         choice = item_priors = None
+        pixels = item_benefit.item_pixels(area_px, footprint)  # what each (element, effect) item changes
         if use_benefit and self.forced_selection is None:
             item_priors = self.benefit_selector.priors(
                 frame_elements.names, item_benefit.priors(layers, n_elements, flags, materials) if need_priors else None)
-            choice, selection = self._choose_items(selection, frame_elements, item_priors, area_px, footprint,
-                                                   effect_rays, tiers=bool(getattr(settings, "quality_tiers", False)))
+            choice, selection = self._choose_items(selection, frame_elements, item_priors, pixels, effect_rays,
+                                                   tiers=bool(getattr(settings, "quality_tiers", False)))
         if self.forced_selection is not None:
             selection = heuristic.force_selection(selection, self.forced_selection)
         selected = np.asarray(selection.selected, bool)
@@ -199,7 +199,6 @@ class FrameRenderer:
 
         if choice is not None:
             start = _timer()
-            pixels = item_benefit.item_pixels(area_px, footprint)
             measured = item_benefit.measure(snapshot, layers, raster.traced_change(), traced, choice.chosen,
                                             element_bounds) if measure else None
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
@@ -250,7 +249,7 @@ class FrameRenderer:
                            selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
 
     # ------------------------------------------------------------------
-    def _choose_items(self, selection, frame_elements, priors, area_px, footprint, effect_rays, tiers=False):
+    def _choose_items(self, selection, frame_elements, priors, pixels, effect_rays, tiers=False):
         """The BENEFIT selection of this frame: (ItemChoice, the SelectionResult it becomes).  The
         result keeps the paper's terms for the log; its elements' effect flags and rays per pixel
         are those traced, which the cost model learns from."""
@@ -258,7 +257,6 @@ class FrameRenderer:
         flags = _flags_array({"shadows": frame_elements.shadows, "reflections": frame_elements.reflections,
                               "refractions": frame_elements.refractions}).astype(bool)
         competing = terms.candidate & terms.visible & terms.within_area
-        pixels = item_benefit.item_pixels(area_px, footprint)
         eligible = flags & competing[:, None] & (pixels > 0)
         overhead = self.cost_model.trace_overhead_ms()
         none = np.zeros(len(flags), bool)

@@ -89,8 +89,6 @@ def measure_differences(snapshot, layers, change, traced, selected, element_boun
     whatever surface receives them, shared between the selected casters whose shadow region
     holds the pixel.  ``traced`` is the frame's ``frame.TracedTerms``.
     """
-    from ..trace.shadow_region import ShadowRegionIndex
-
     n = len(snapshot.elements)
     difference = np.zeros(n)
     flat_change = np.asarray(change, np.float64).reshape(-1, change.shape[-1])
@@ -106,7 +104,19 @@ def measure_differences(snapshot, layers, change, traced, selected, element_boun
             owner[where] = element_at[where]
     mine = np.flatnonzero((owner >= 0) & (owner < n))
     difference += np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)[:n]
-    casters = [index for index in np.flatnonzero(selected)
+    return difference + shadow_differences(snapshot, layers, change, traced, selected, element_bounds)
+
+
+def shadow_differences(snapshot, layers, change, traced, casting, element_bounds) -> np.ndarray:
+    """Per element: the summed change the traced shadows made (``change``'s y) on the pixels in its
+    shadow region, shared between the ``casting`` elements (tagged for shadows) whose region holds
+    the pixel; each pixel's change (all lights) counted once."""
+    from ..trace.shadow_region import ShadowRegionIndex
+
+    n = len(snapshot.elements)
+    difference = np.zeros(n)
+    flat_change = np.asarray(change, np.float64).reshape(-1, change.shape[-1])
+    casters = [index for index in np.flatnonzero(casting)
                if snapshot.elements[index].shadows and element_bounds[index] is not None]
     if casters:
         shadow_change = flat_change[:, 1]

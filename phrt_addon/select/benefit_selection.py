@@ -162,26 +162,28 @@ class BenefitSelector:
         for i, name in enumerate(names):
             for j, effect in enumerate(EFFECTS):
                 was[i, j] = (name, effect) in self.previous
-        adjusted = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
+        switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
         waited = np.array([[self.waited.get((name, effect), 0) for effect in EFFECTS] for name in names],
                           np.float64).reshape(eligible.shape)
         explore = eligible & fresh & (cost * (1.0 + ADD_SLACK) <= capacity)
+        bonus = np.zeros(eligible.shape)
         if np.any(explore):
-            total = float(adjusted[eligible].sum()) + 1e-12
-            adjusted = adjusted + np.where(explore, total * np.minimum((waited + 1) / EXPLORE_FRAMES, 1.0), 0.0)
-        charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
+            total = float(switched[eligible].sum()) + 1e-12
+            bonus[explore] = total * np.minimum((waited[explore] + 1) / EXPLORE_FRAMES, 1.0)
         rate = np.zeros(eligible.shape)
         if tiers:
-            rate = self._choose_rates(names, eligible, value, adjusted - np.where(was, value * (1.0 + SWITCH),
-                                                                                   value * (1.0 - SWITCH)),
-                                      was, cost, capacity)
+            rate = self._choose_rates(names, eligible, value, bonus, was, cost, capacity)
             chosen = rate > 0
         else:
-            flat = knapsack.solve(np.where(eligible, adjusted, 0.0).ravel(),
+            charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
+            flat = knapsack.solve(np.where(eligible, switched + bonus, 0.0).ravel(),
                                   np.where(eligible, charged, np.inf).ravel(), capacity)
             chosen = flat.reshape(eligible.shape) & eligible
             rate[chosen] = 1.0
-        spent = np.where(chosen, cost * np.vectorize(lambda r: TIER_COST.get(r, 0.0))(rate), 0.0)
+        share = np.zeros(eligible.shape)
+        for tier, cost_share in TIER_COST.items():
+            share[rate == tier] = cost_share
+        spent = np.where(chosen, cost * share, 0.0)
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
                           per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin, rate=rate,
                           chosen_cost_ms=spent)

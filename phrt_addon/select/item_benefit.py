@@ -59,12 +59,6 @@ def measure(snapshot, layers, change, traced, chosen, element_bounds) -> np.ndar
                 owner[where] = element_at[where]
         mine = np.flatnonzero((owner >= 0) & (owner < n))
         result[:, column] = np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)[:n]
-    shadow_only = np.where(np.asarray(chosen)[:, 0], True, False)
-    if np.any(shadow_only):
-        no_bounce = type(traced)()
-        no_bounce.shadow_visibility = traced.shadow_visibility
-        shadow_change = np.array(change, np.float64, copy=True)
-        shadow_change[..., 0] = 0.0
-        result[:, 0] = benefit.measure_differences(snapshot, layers, shadow_change, no_bounce, shadow_only,
-                                                   element_bounds)
+    result[:, 0] = benefit.shadow_differences(snapshot, layers, change, traced, np.asarray(chosen)[:, 0],
+                                              element_bounds)
     return result * np.asarray(chosen, bool)

@@ -109,13 +109,18 @@ def test_the_margin_follows_the_predictions_recent_errors_and_ages_by_frames():
     assert tried
 
 
-def test_a_frame_with_benefit_traces_items_and_logs_their_estimates():
+def benefit_mirror_scene(block_shadows):
+    """test_frame's mirror scene under BENEFIT, its matte block tagged for reflections too (tracing
+    that reflection changes nearly nothing)."""
     snapshot = mirror_scene("HYBRID")
     snapshot.settings.selection = "BENEFIT"
-    # The block is tagged for reflections too (matte: its reflection changes nearly nothing).
-    snapshot.elements[1] = Element("Block", "Block", priority=1.0, shadows=True, reflections=True,
+    snapshot.elements[1] = Element("Block", "Block", priority=1.0, shadows=block_shadows, reflections=True,
                                    refractions=False)
-    result, _, renderer = render(snapshot)
+    return snapshot
+
+
+def test_a_frame_with_benefit_traces_items_and_logs_their_estimates():
+    result, _, renderer = render(benefit_mirror_scene(block_shadows=True))
     rows = {row["element"]: row for row in result.selection_rows}
     assert rows["Mirror"]["selected"] == 1 and "reflections" in rows["Mirror"]["effects"]
     assert all(np.isfinite(row["predicted_ms"]) and np.isfinite(row["benefit"]) for row in rows.values())
@@ -130,11 +135,7 @@ def test_a_frame_with_benefit_traces_items_and_logs_their_estimates():
 
 
 def test_the_mirror_outranks_the_matte_reflection_from_the_first_frame():
-    snapshot = mirror_scene("HYBRID")
-    snapshot.settings.selection = "BENEFIT"
-    snapshot.elements[1] = Element("Block", "Block", priority=1.0, shadows=False, reflections=True,
-                                   refractions=False)
-    result, _, _ = render(snapshot)
+    result, _, _ = render(benefit_mirror_scene(block_shadows=False))
     value = result.selection.benefit_estimate
     per_pixel_mirror = value[0] / max(result.selection.elements.area_px[0], 1)
     per_pixel_block = value[1] / max(result.selection.elements.area_px[1], 1)
