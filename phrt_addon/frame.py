@@ -32,7 +32,7 @@ from dataclasses import replace as dataclass_replace
 
 import numpy as np
 
-from .select import benefit, benefit_selection, heuristic, item_benefit
+from .select import benefit, benefit_selection, heuristic, item_benefit, item_costs
 from .select import selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
@@ -70,6 +70,7 @@ class FrameRenderer:
         self.benefit_model = benefit.BenefitModel()
         # The BENEFIT selection's per-item estimates and margin (phrt_addon/select/benefit_selection.py).
         self.benefit_selector = benefit_selection.BenefitSelector()
+        self.item_costs = item_costs.ItemCosts()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
         self.forced_selection = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
@@ -203,8 +204,15 @@ class FrameRenderer:
                                             element_bounds) if measure else None
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
             if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
-                self.benefit_selector.observe_time(selection.predicted_trace_ms,
-                                                   max(trace_ms - counters.upload_ms, 0.0))
+                if self.cost_model.trace_overhead_ms() > 0 and self.item_costs.measured(choice.chosen):
+                    self.benefit_selector.observe_time(selection.predicted_trace_ms,
+                                                       max(trace_ms - counters.upload_ms, 0.0))
+                self.item_costs.observe(
+                    frame_elements.names, _expected_rays(area_px, effect_rays), traced_frame.item_rays,
+                    choice.chosen, choice.rate, [counters.shadow_ms, counters.reflection_ms, counters.refraction_ms],
+                    [counters.shadow_rays, counters.reflection_rays, counters.refraction_rays],
+                    shadow_setup_ms=counters.shadow_setup_ms,
+                    embree_ms=[counters.shadow_embree_ms, counters.reflection_embree_ms, counters.refraction_embree_ms])
             select_ms += _ms(start)
         elif measure:
             # The error-aware relevance learns what tracing changed, measured on the GPU beside the
@@ -259,13 +267,11 @@ class FrameRenderer:
         competing = terms.candidate & terms.visible & terms.within_area
         eligible = flags & competing[:, None] & (pixels > 0)
         overhead = self.cost_model.trace_overhead_ms()
-        none = np.zeros(len(flags), bool)
-        cost_ms = np.stack([self.cost_model.predict_element_ms(dataclass_replace(
-            frame_elements, shadows=flags[:, 0] if j == 0 else none, reflections=flags[:, 1] if j == 1 else none,
-            refractions=flags[:, 2] if j == 2 else none, rays_per_pixel=effect_rays[:, j]), terms.cost, "measured")
-            for j in range(3)], axis=1)
+        cost_ms = self.item_costs.predict(frame_elements.names, _expected_rays(frame_elements.area_px, effect_rays),
+                                          frame_elements.rt_cost)
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
-                                              cost_ms, selection.time_left_ms, overhead, tiers=tiers)
+                                              cost_ms, selection.time_left_ms, overhead, tiers=tiers,
+                                              fixed_ms=self.item_costs.fixed_ms())
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)
@@ -275,7 +281,7 @@ class FrameRenderer:
             frame_elements, shadows=traced_flags[:, 0], reflections=traced_flags[:, 1],
             refractions=traced_flags[:, 2], rays_per_pixel=np.sum(effect_rays * traced_flags, axis=1))
         predicted = np.where(selected, np.sum(choice.chosen_cost_ms, axis=1), np.sum(choice.cost_ms, axis=1))
-        trace = float(np.sum(choice.chosen_cost_ms)) + (overhead if np.any(selected) else 0.0)
+        trace = float(np.sum(choice.chosen_cost_ms)) + ((overhead + choice.fixed_ms) if np.any(selected) else 0.0)
         return choice, dataclass_replace(
             forced, elements=as_traced, predicted_ms=predicted, predicted_trace_ms=trace,
             effects=choice.effects, benefit_estimate=np.sum(choice.value, axis=1),
@@ -369,6 +375,11 @@ def _effect_rays_per_pixel(snapshot, area_px, footprint) -> np.ndarray:
     shadows = np.asarray(footprint, np.float64) / np.maximum(np.asarray(area_px, np.float64), 1.0)
     return np.stack([shadows, np.full(len(shadows), 1.0 + n_lights),  # the reflection ray and its hit's shadow rays
                      np.full(len(shadows), 2.0 + n_lights)], axis=1)  # in, out, and the hit's shadow rays
+
+
+def _expected_rays(area_px, effect_rays) -> np.ndarray:
+    """(n, 3) rays each (element, effect) item is expected to cast (before its learned ratio)."""
+    return np.asarray(area_px, np.float64)[:, None] * np.asarray(effect_rays, np.float64)
 
 
 def _flags_array(flags) -> np.ndarray:

@@ -184,6 +184,7 @@ class ReplayRun:
             "relevance": str(self.settings.relevance).lower(),
             "selection_order": str(self.settings.selection_order).lower(),
             "selection": str(self.settings.selection).lower(),
+            "quality_tiers": bool(getattr(self.settings, "quality_tiers", False)),
             "budget_at": fraction if mode == "HYBRID" and budget_source is not None else None,
             "budget_source": budget_source, "work": self._work, **versions()}
         try:

@@ -218,7 +218,7 @@ def _sweep_sections(rows, groups, regrets, pops, oracle_results, files):
                 "heuristic (the cost model, the selection weight I, the greedy order, the relevance); "
                 "columns are the budgets of the sweep.")))
         paper_label = variant_label(BASELINE_VARIANT)
-        error_label = variant_label(BASELINE_VARIANT[:3] + ("error",))
+        error_label = variant_label(BASELINE_VARIANT[:3] + ("error", "paper"))
         if paper_label in variants and error_label in variants:
             items += _relevance_comparison(scene, path, variants[paper_label], variants[error_label])
 

@@ -49,7 +49,7 @@ PAPER_SCENES = {"arcade": "sponza", "atrium": "atrium"}
 
 
 # Settings of the paper's heuristic as the baseline curve (the other variants change one knob).
-BASELINE_VARIANT = ("measured", defaults.SELECTION_WEIGHT, "relevance", "paper")
+BASELINE_VARIANT = ("measured", defaults.SELECTION_WEIGHT, "relevance", "paper", "paper")
 
 
 @dataclass
@@ -81,13 +81,17 @@ class Run:
 
     @property
     def variant(self):
-        """(cost mode, selection weight I, greedy order, relevance) of the run's selection."""
+        """(cost mode, selection weight I, greedy order, relevance, selection) of the run's
+        selection; the selection ``paper``, ``benefit`` or ``benefit+tiers``."""
         summary = self.summary
         weight = summary.get("selection_weight")
+        selection = str(summary.get("selection") or "paper").lower()
+        if selection == "benefit" and summary.get("quality_tiers"):
+            selection = "benefit+tiers"
         return (str(summary.get("cost_mode") or "measured").lower(),
                 float(defaults.SELECTION_WEIGHT if weight is None else weight),
                 str(summary.get("selection_order") or "relevance").lower(),
-                str(summary.get("relevance") or "paper").lower())
+                str(summary.get("relevance") or "paper").lower(), selection)
 
     @property
     def budget_at(self):

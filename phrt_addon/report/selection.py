@@ -117,7 +117,9 @@ def run_regrets(runs, results):
 
 def variant_label(variant) -> str:
     """A short name of a selection variant: the paper's heuristic and what differs from it."""
-    cost_mode, weight, order, relevance = variant
+    cost_mode, weight, order, relevance, selection = (tuple(variant) + ("paper",))[:5]
+    if selection.startswith("benefit"):  # the (element, effect) items: R, I and the order play no part
+        return "BENEFIT items, quality tiers" if selection == "benefit+tiers" else "BENEFIT items"
     parts = ["error-aware R" if relevance == "error" else "paper R"]
     parts.append(f"{cost_mode} cost")
     parts.append(f"I={weight:g}")
@@ -135,7 +137,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
         pop = pops.get(id(run))
         hybrid = run.mode == "HYBRID"
         rates = np.array(list(run.selection.flips_per_element_per_100().values()), dtype=float)
-        cost_mode, weight, order, relevance = run.variant
+        cost_mode, weight, order, relevance = run.variant[:4]
         share = regret.judged if regret is not None else Captured()
         budget_ms = run.summary.get("budget_ms") if hybrid else None
         rows.append({

@@ -27,19 +27,21 @@ Switching cost
     ``ADD_SLACK`` to spare, so the frame-to-frame noise of the time left does not toggle the
     item that just fits.
 Cost
-    Per item from the cost model (``measured`` mode, the element with that one effect: its
-    pixels, the rays one pixel of the effect casts, the element's learned rays ratio, the
-    effect's learned ms per ray and the residual; Q = 1 is the measured cost, a designer's Q
-    scales it); the trace stage's fixed overhead is charged once; the time left is reduced by
+    Per item from ``item_costs`` (its expected rays times its learned rays ratio times the
+    effect's learned ms per ray; Q = 1 is the measured cost, a designer's Q scales it), plus per
+    effect a fixed part paid once if any of its items is traced (``knapsack.solve_grouped``);
+    the trace stage's fixed overhead is charged once; the time left is reduced by
     a margin, the 80th percentile of (measured - predicted) trace ms over the traced frames among
-    the last ``MARGIN_FRAMES`` frames (none without such frames: the cost model already
-    charges an effect never measured 1.5x its prior; within -half..all of the time left): a prediction found too low is not
+    the last ``MARGIN_FRAMES`` frames whose prediction was informed (the fixed overhead and every
+    chosen effect measured before; the median below ``MARGIN_MIN_SAMPLES`` such frames; none
+    without: an effect never measured is charged 1.5x its prior; within -half..half of the
+    time left): a prediction found too low is not
     believed again after a few cheap frames, one found too high lets the time be filled.  The
     margin is additive (the trace stage's fixed work per light and layer is what the per-item
     costs miss, whatever is chosen), and it ages by frames, so a frame that traces nothing
     cannot freeze it.
 Choice
-    ``knapsack.solve`` within the time left.
+    ``knapsack.solve_grouped`` within the time left (``solve_choices`` with tiers).
 
 The constants were set on the training paths (arcade path1-2, atrium path1) only; the
 judged paths are arcade path3, atrium path2-3 and the showcase (docs/DESIGN.md).
@@ -70,6 +72,7 @@ TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
 TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
 MARGIN_FRAMES = 20
 MARGIN_QUANTILE = 80
+MARGIN_MIN_SAMPLES = 5
 # Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
 # on any frame that traces an item never measured.
 MEASURE_EVERY = 2
@@ -92,6 +95,7 @@ class ItemChoice:
     margin_ms: float
     rate: np.ndarray = None   # (n, 3) the rate each item is traced at (0: not traced)
     chosen_cost_ms: np.ndarray = None  # (n, 3) predicted ms of the chosen items at their rate
+    fixed_ms: float = 0.0     # the fixed parts of the effects chosen (paid once each)
 
     @property
     def rates(self) -> dict[str, np.ndarray]:
@@ -129,7 +133,10 @@ class BenefitSelector:
         recent = [error for frame, error in self.errors if frame > self.frames - MARGIN_FRAMES]
         if not recent:  # nothing measured lately: the cost model's own priors (margined) stand
             return 0.0
-        return float(np.clip(np.percentile(np.asarray(recent), MARGIN_QUANTILE), -0.5 * available_ms, available_ms))
+        # Few samples: their median (an 80th percentile of two is their maximum, one outlier
+        # would hold the time left for MARGIN_FRAMES frames); never more than half the time left.
+        quantile = MARGIN_QUANTILE if len(recent) >= MARGIN_MIN_SAMPLES else 50
+        return float(np.clip(np.percentile(np.asarray(recent), quantile), -0.5 * available_ms, 0.5 * available_ms))
 
     def per_pixel(self, names, priors: np.ndarray, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) learned estimates (prior where never measured) and (n, 3) never-measured flags."""
@@ -144,9 +151,10 @@ class BenefitSelector:
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
-               tiers: bool = False) -> ItemChoice:
+               tiers: bool = False, fixed_ms=None) -> ItemChoice:
         """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
-        ``cost_ms`` each item's predicted ms at full rate (the cost model's, Q included).
+        ``cost_ms`` each item's predicted ms at full rate (``item_costs``, Q included);
+        ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced.
         ``tiers``: each item may be bought at full, half or quarter rate (``TIER_RATES``)."""
         eligible = np.asarray(eligible, bool)
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
@@ -170,14 +178,18 @@ class BenefitSelector:
         if np.any(explore):
             total = float(switched[eligible].sum()) + 1e-12
             bonus[explore] = total * np.minimum((waited[explore] + 1) / EXPLORE_FRAMES, 1.0)
+        fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
+            np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
         rate = np.zeros(eligible.shape)
-        if tiers:
-            rate = self._choose_rates(names, eligible, value, bonus, was, cost, capacity)
+        if tiers:  # the fixed parts of every effect with an item are paid up front
+            rate = self._choose_rates(names, eligible, value, bonus, was, cost,
+                                      max(capacity - float(fixed[eligible.any(axis=0)].sum()), 0.0))
             chosen = rate > 0
         else:
             charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
-            flat = knapsack.solve(np.where(eligible, switched + bonus, 0.0).ravel(),
-                                  np.where(eligible, charged, np.inf).ravel(), capacity)
+            flat = knapsack.solve_grouped(np.where(eligible, switched + bonus, 0.0).ravel(),
+                                          np.where(eligible, charged, np.inf).ravel(),
+                                          np.tile(np.arange(len(EFFECTS)), len(eligible)), fixed, capacity)
             chosen = flat.reshape(eligible.shape) & eligible
             rate[chosen] = 1.0
         share = np.zeros(eligible.shape)
@@ -186,7 +198,7 @@ class BenefitSelector:
         spent = np.where(chosen, cost * share, 0.0)
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
                           per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin, rate=rate,
-                          chosen_cost_ms=spent)
+                          chosen_cost_ms=spent, fixed_ms=float(fixed[chosen.any(axis=0)].sum()))
 
     def _choose_rates(self, names, eligible, value, bonus, was, cost, capacity) -> np.ndarray:
         """(n, 3) rate per item (0: not traced) by the multiple-choice knapsack over TIER_RATES:

@@ -160,3 +160,74 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarr
         choice[:] = -1
         choice[single // n_options] = single % n_options
     return choice
+
+
+def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
+    """:func:`solve` where each item belongs to a group (``groups``: int per item, an index into
+    ``group_costs``) and a group's cost is paid once if any of its items is chosen (an effect's
+    fixed work: the shadow regions of the frame's pixels).  One dynamic programme whose state per
+    group is open (its cost paid) or not: exact for the rounded costs up to ``EXACT_LIMIT`` items;
+    beyond it every group with a useful item is paid for up front and :func:`solve` fills the rest.
+    Compared with the best single item that fits with its group's cost."""
+    values = _finite(values, nan=0.0)
+    costs = np.maximum(_finite(costs, nan=LARGE), 0.0)
+    groups = np.asarray(groups, np.int64).ravel()
+    group_costs = np.maximum(_finite(group_costs, nan=LARGE), 0.0)
+    if not (values.shape == costs.shape == groups.shape):
+        raise ValueError(f"values, costs and groups differ in shape: {values.shape}, {costs.shape}, {groups.shape}")
+    if len(groups) and (groups.min() < 0 or groups.max() >= len(group_costs)):
+        raise ValueError("a group index is outside group_costs")
+    capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=LARGE))
+    chosen = np.zeros(len(values), dtype=bool)
+    if capacity < 0 or len(values) == 0:
+        return chosen
+    total = costs + group_costs[groups] if len(groups) else costs
+    useful = np.flatnonzero((values > 0) & (total <= capacity))
+    if len(useful) == 0:
+        return chosen
+    if len(useful) > EXACT_LIMIT or capacity <= 0:
+        paid = float(group_costs[np.unique(groups[useful])].sum())
+        chosen[useful] = solve(values[useful], costs[useful], capacity - paid, bins)
+        return chosen
+    n_bins = bins_for(len(useful) + len(group_costs), bins)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        def in_bins(ms):
+            scaled = np.nan_to_num(np.minimum(ms / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
+            return np.ceil(scaled * (1.0 - 1e-9)).astype(np.int64)
+        weights, group_weights = in_bins(costs[useful]), in_bins(group_costs)
+    best = np.zeros(n_bins + 1)
+    trail = []  # per group with useful items: (group, its items, took, opened-at mask)
+    for group in np.unique(groups[useful]).tolist():
+        members = np.flatnonzero(groups[useful] == group)
+        fixed = int(group_weights[group])
+        if fixed > n_bins:
+            continue
+        opened = np.full(n_bins + 1, -np.inf)
+        opened[fixed:] = best[:n_bins + 1 - fixed]
+        took = np.zeros((len(members), n_bins + 1), dtype=bool)
+        for position, member in enumerate(members.tolist()):
+            weight = int(weights[member])
+            if weight > n_bins - fixed:
+                continue
+            candidate = opened[:n_bins + 1 - weight] + values[useful[member]]
+            better = candidate > opened[weight:]
+            took[position, weight:] = better
+            opened[weight:] = np.where(better, candidate, opened[weight:])
+        # Opening the group pays only if it buys something: an empty open group is never better.
+        use = opened > best
+        trail.append((members, took, use, fixed))
+        best = np.where(use, opened, best)
+    remaining = n_bins
+    for members, took, use, fixed in reversed(trail):
+        if not use[remaining]:
+            continue
+        for position in range(len(members) - 1, -1, -1):
+            if took[position, remaining]:
+                chosen[useful[members[position]]] = True
+                remaining -= int(weights[members[position]])
+        remaining -= fixed
+    single = useful[np.argmax(values[useful])]
+    if values[single] > float(np.sum(values[chosen])):
+        chosen[:] = False
+        chosen[single] = True
+    return chosen

@@ -44,15 +44,12 @@ MAX_CLUSTERS = 8
 MISS = -1
 
 
-def worker_count() -> int:
-    return max(1, min(os.cpu_count() or 1, 8))
+def worker_count() -> int: return max(1, min(os.cpu_count() or 1, 8))  # noqa: E704
 
 
 def ray_epsilon(points: np.ndarray, scene_extent, view_distance=None) -> np.ndarray:
     """Offset for secondary-ray origins: many float32 ulps of the point's magnitude,
-    with a floor relative to the scene size (works from 1e-3 to 1e5 units).
-
-    ``points`` are in the frame Embree sees them in (a cluster's); ``scene_extent`` is
+    with a floor relative to the scene size (works from 1e-3 to 1e5 units).  ``points`` are in the frame Embree sees them in (a cluster's); ``scene_extent`` is
     that cluster's size (a number or one per point).  ``view_distance`` (optional, per
     point): how far the ray that found the point travelled, from the camera for a
     G-buffer position or from the ray origin for a hit.  Such a point carries float32
@@ -163,7 +160,7 @@ class TraceScene:
         self._dynamic = []
         self._element_set = np.full(1, -1, np.int64)  # element + 1 -> index into sets() (its cluster's frame)
         self.stats = {"upload_ms": 0.0, "static_builds": 0, "static_triangles": 0, "dynamic_triangles": 0,
-                      "clusters": 0}
+                      "clusters": 0, "embree_ms": 0.0}
 
     def close(self):
         if self._pool is not None:
@@ -288,6 +285,14 @@ class TraceScene:
 
     # -- queries ------------------------------------------------------------
     def _run(self, scene, origins, directions, **kwargs):
+        """Embree's own queries, their wall time summed in ``stats["embree_ms"]`` (item_costs.py)."""
+        start = time.perf_counter()
+        try:
+            return self._query(scene, origins, directions, **kwargs)
+        finally:
+            self.stats["embree_ms"] += (time.perf_counter() - start) * 1e3
+
+    def _query(self, scene, origins, directions, **kwargs):
         n = len(origins)
         if self._pool is None or n < 2 * PARALLEL_CHUNK:
             return scene.run(origins, directions, **kwargs)

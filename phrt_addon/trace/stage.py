@@ -91,6 +91,13 @@ class TraceCounters:
     reflection_ms: float = 0.0
     refraction_ms: float = 0.0
     upload_ms: float = 0.0
+    # Of shadow_ms, building the lights' shadow regions over the frame's pixels: a fixed part of
+    # any frame that traces shadows, whatever the casters' sizes (select/item_costs.py).
+    shadow_setup_ms: float = 0.0
+    # Of each effect's ms, the time inside Embree's queries (its per-ray part, numpy aside).
+    shadow_embree_ms: float = 0.0
+    reflection_embree_ms: float = 0.0
+    refraction_embree_ms: float = 0.0
 
     @property
     def rays(self):
@@ -201,6 +208,7 @@ class TraceStage:
 
         # Shadows: for each light, the pixels a selected caster can shadow get traced visibility.
         start = time.perf_counter()
+        embree_before = scene.stats["embree_ms"]
         casters = [i for i in np.flatnonzero(wanted_effects["shadows"]) if element_bounds[i] is not None]
         for layer_name, pixels in layers.items():
             if not casters or len(pixels) == 0:
@@ -209,6 +217,7 @@ class TraceStage:
             for light_index, light in enumerate(snapshot.lights):
                 if not light.cast_shadows:
                     continue
+                setup_start = time.perf_counter()
                 if points_world is None:
                     points_world = pixels.world()
                     chunks = PointChunks(points_world, keys=screen_tiles(pixels))  # shared by the layer's lights
@@ -219,6 +228,7 @@ class TraceStage:
                     caster_region = index.region(element_bounds[caster])
                     caster_regions.append(caster_region)
                     region |= caster_region
+                counters.shadow_setup_ms += _ms(setup_start)
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:
                     continue
@@ -246,6 +256,7 @@ class TraceStage:
                 _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region
                                                    in caster_regions], len(ray_idx))
         counters.shadow_ms = _ms(start)
+        counters.shadow_embree_ms, embree_before = scene.stats["embree_ms"] - embree_before, scene.stats["embree_ms"]
         # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
         bounces = int(snapshot.settings.max_bounces) >= 1
 
@@ -275,6 +286,7 @@ class TraceStage:
             _attribute_to_pixels(item_rays[:, 1], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.reflection_ms = _ms(start)
+        counters.reflection_embree_ms, embree_before = scene.stats["embree_ms"] - embree_before, scene.stats["embree_ms"]
 
         # Refractions through selected transparent elements (transparent layer only).
         start = time.perf_counter()
@@ -301,6 +313,7 @@ class TraceStage:
                 _attribute_to_pixels(item_rays[:, 2], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
         counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
         counters.refraction_ms = _ms(start)
+        counters.refraction_embree_ms = scene.stats["embree_ms"] - embree_before
         effect_rate = {effect: image.reshape(height, width) for effect, image in effect_rate.items()}
         return TraceResult(traced=traced, counters=counters, element_rays=item_rays.sum(axis=1), item_rays=item_rays,
                            rate=np.maximum.reduce(list(effect_rate.values())), effect_rate=effect_rate)

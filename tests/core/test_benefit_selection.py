@@ -88,19 +88,32 @@ def test_a_never_traced_item_is_tried_within_the_exploration_bound_when_it_fits(
     assert tried_at is not None and tried_at <= benefit_selection.EXPLORE_FRAMES
 
 
+def test_one_outlier_does_not_hold_the_margin():
+    """Below MARGIN_MIN_SAMPLES informed frames the margin is their median: one frame measured
+    15 ms over its prediction (a first frame, a hiccup) does not shut the time left for 20 frames."""
+    selector = BenefitSelector()
+    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.5, 0]], [[0, 4, 0]]
+    for error in (15.0, 0.0, 0.5):
+        choose(selector, names, pixels, priors, cost, 10.0, exact=False)
+        selector.observe_time(4.0, 4.0 + error)
+    assert selector.margin_ms(30.0) == pytest.approx(0.5)
+    assert choose(selector, names, pixels, priors, cost, 10.0, exact=False).chosen.any()
+
+
 def test_the_margin_follows_the_predictions_recent_errors_and_ages_by_frames():
     selector = BenefitSelector()
     assert selector.margin_ms(30.0) == 0.0  # nothing measured: no margin
-    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.5, 0]], [[0, 4, 0]]
+    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.5, 0]], [[0, 6, 0]]
     for error in [0.0] * 10 + [8.0] * 4:  # four frames measured 8 ms above their prediction
         choose(selector, names, pixels, priors, cost, 10.0, exact=False)
-        selector.observe_time(4.0, 4.0 + error)
-    assert selector.margin_ms(10.0) >= 8.0
-    # 4 ms predicted no longer fits 10 ms once its errors are known; a few exact frames later the
+        selector.observe_time(6.0, 6.0 + error)
+    assert selector.margin_ms(40.0) >= 8.0
+    assert selector.margin_ms(10.0) == 5.0  # never more than half the time left
+    # 6 ms predicted no longer fits 10 ms once its errors are known; a few exact frames later the
     # errors are still in the window.
     for _ in range(3):
         assert not choose(selector, names, pixels, priors, cost, 10.0, exact=False).chosen.any()
-        selector.observe_time(4.0, 4.0)
+        selector.observe_time(6.0, 6.0)
     # Frames that trace nothing age the errors out: the item is tried again (a margin that only
     # traced frames could lower would keep a tight budget from ever tracing again).
     tried = False

@@ -106,3 +106,48 @@ def test_multiple_choice_takes_a_cheaper_rate_when_full_does_not_fit():
     # Two such items in T = 8: both at quarter/half beat one at full.
     choice = knapsack.solve_choices([[10.0, 8.5, 6.5]] * 2, [[8.0, 4.4, 2.6]] * 2, 8.0)
     assert sorted(choice.tolist()) == [1, 2]
+
+
+def grouped_brute_force(values, costs, groups, group_costs, capacity):
+    best = 0.0
+    for bits in product((False, True), repeat=len(values)):
+        mask = np.array(bits, bool)
+        spent = costs[mask].sum() + group_costs[np.unique(groups[mask])].sum()
+        if spent <= capacity and values[mask].sum() > best:
+            best = values[mask].sum()
+    return best
+
+
+grouped_instances = st.integers(1, 8).flatmap(lambda n: st.tuples(
+    st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n),
+    st.lists(st.floats(0.0, 20.0), min_size=n, max_size=n),
+    st.lists(st.integers(0, 2), min_size=n, max_size=n),
+    st.lists(st.floats(0.0, 15.0), min_size=3, max_size=3),
+    st.floats(0.0, 60.0)))
+
+
+@settings(max_examples=300, deadline=None)
+@given(grouped_instances)
+def test_grouped_never_over_capacity_and_optimal_within_the_rounding(instance):
+    """A group's cost (an effect's fixed work) is paid once when any of its items is chosen."""
+    values, costs, groups, group_costs, capacity = (np.array(instance[0]), np.array(instance[1]),
+                                                    np.array(instance[2]), np.array(instance[3]), instance[4])
+    chosen = knapsack.solve_grouped(values, costs, groups, group_costs, capacity)
+    spent = costs[chosen].sum() + group_costs[np.unique(groups[chosen])].sum()
+    assert spent <= capacity * (1 + 1e-8)
+    optimum = grouped_brute_force(values, costs, groups, group_costs, capacity)
+    # Each chosen item and each opened group loses at most one bin to the rounding.
+    n_bins = knapsack.bins_for(len(values) + len(group_costs))
+    shrunk = grouped_brute_force(values, costs, groups, group_costs,
+                                 capacity * (1.0 - (len(values) + len(group_costs)) / n_bins))
+    assert optimum + 1e-9 >= values[chosen].sum() >= shrunk - 1e-9
+
+
+def test_grouped_leaves_a_group_whose_fixed_cost_buys_less_than_another():
+    """Two cheap shadow items behind a 4 ms fixed part against one reflection item with none:
+    5 ms of time buys the reflection (4 + 2 x 0.6 > 5 leaves the shadows out)."""
+    values, costs, groups = np.array([3.0, 3.0, 4.0]), np.array([0.6, 0.6, 4.5]), np.array([0, 0, 1])
+    chosen = knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 5.0)
+    assert chosen.tolist() == [False, False, True]
+    # With 6 ms both shadow items fit behind their fixed part (6 > 4 + 1.2) and are worth more.
+    assert knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 6.0).tolist() == [True, True, False]

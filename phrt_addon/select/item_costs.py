@@ -1,0 +1,125 @@
+"""What an (element, effect) item costs to trace: the BENEFIT selection's cost model.
+
+The paper's cost model (``cost_model.py``) predicts an element's ms as its rays times one cost per
+ray per effect.  Measured on the sample scenes, an effect's time is mostly a fixed part (atrium,
+320x240: shadows of one small caster, 1,000 rays, 4.5 ms; of every caster, 36,000 rays, 28 ms:
+about 3.8 ms of building each light's shadow regions over the frame's pixels, then 0.7 us a
+ray), so one cost per ray learned on a small item over-predicts a large one by 10x or more, and an
+item predicted too dear is never traced, so never measured again.  Here, per effect:
+
+* ``per_ray`` ms: the slope of a robust line (Theil-Sen: the median of the pairwise slopes)
+  through the last ``WINDOW`` traced frames' (rays, ms), once their ray counts spread by
+  ``SPREAD``; before that ``EMBREE_FACTOR`` times the ms a ray spent inside Embree's queries
+  (``TraceCounters.*_embree_ms``: the numpy work around a ray costs about twice Embree's own; on
+  a small batch Embree's per-call overhead makes this an over- not an under-prediction); the
+  cost model's prior times ``UNMEASURED_MARGIN`` before the effect's first traced frame;
+* ``fixed`` ms, charged once a frame when any item of the effect is traced: the median of
+  (ms - per_ray x rays) over the window, at least (for shadows) the trace stage's own timer of
+  the lights' region building (``TraceCounters.shadow_setup_ms``);
+* each item's rays: its expected rays (``area_px`` x the rays one of its pixels costs, from the
+  shadow footprint for shadows) times a ratio learned from the rays the trace stage attributed to
+  it (``TraceResult.item_rays``, an EMA); an item never traced takes the median ratio of the
+  effect's measured items (1 before any), so one caster's measurement corrects all of them.
+
+Q (``rt_cost``) scales an item's cost; it never adds a hidden margin.  Plain numpy, no bpy.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from ..schema import EFFECTS
+from .cost_model import MS_PER_RAY_PRIOR, UNMEASURED_MARGIN
+
+WINDOW = 32
+SPREAD = 1.5
+# Per-ray ms over Embree's per-ray ms, before a spread of ray counts lets the slope be fitted:
+# atrium path1 (a training path), every caster's shadows, 36,000 rays: 0.56 us a ray against 0.19
+# inside Embree (a ratio, machine-independent to first order).
+EMBREE_FACTOR = 3.0          # max/min ray count of the window before an intercept is fitted
+RATIO_SMOOTHING = 0.3
+RATIO_RANGE = (1e-3, 1e3)
+MAX_MS = 1e12
+
+
+class ItemCosts:
+    """Learned per replay (keys are element names, so the order of elements may change)."""
+
+    def __init__(self):
+        self.samples = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # (rays, ms, setup ms)
+        self.ratio: dict[tuple[str, str], float] = {}
+        self._fit = {effect: (0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN) for effect in EFFECTS}
+        self._pooled = np.ones(len(EFFECTS))
+
+    # -- predictions -------------------------------------------------------------------------
+    def fixed_ms(self) -> np.ndarray:
+        """(3,) ms charged once a frame per effect traced at all (EFFECTS order)."""
+        return np.array([self._fit[effect][0] for effect in EFFECTS])
+
+    def per_ray_ms(self) -> np.ndarray:
+        return np.array([self._fit[effect][1] for effect in EFFECTS])
+
+    def measured(self, chosen) -> bool:
+        """Whether every effect with a chosen item (``chosen`` (n, 3)) has been measured."""
+        return all(self.samples[effect] for j, effect in enumerate(EFFECTS) if np.any(np.asarray(chosen)[:, j]))
+
+    def ratios(self, names) -> np.ndarray:
+        """(n, 3) learned rays ratio of each item (the effect's pooled median where unmeasured)."""
+        out = np.tile(self._pooled, (len(names), 1))
+        if self.ratio:
+            for i, name in enumerate(names):
+                for j, effect in enumerate(EFFECTS):
+                    value = self.ratio.get((name, effect))
+                    if value is not None:
+                        out[i, j] = value
+        return out
+
+    def predict(self, names, expected_rays, rt_cost) -> np.ndarray:
+        """(n, 3) ms of each item at full rate, its effect's fixed part not included."""
+        rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
+        ms = rays * self.per_ray_ms()[None, :] * np.asarray(rt_cost, np.float64).reshape(-1, 1)
+        return np.clip(np.nan_to_num(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
+
+    # -- learning ------------------------------------------------------------------------------
+    def observe(self, names, expected_rays, item_rays, chosen, rates, effect_ms, effect_rays,
+                shadow_setup_ms=0.0, embree_ms=(0.0, 0.0, 0.0)) -> None:
+        """A traced frame: ``expected_rays``/``item_rays``/``chosen``/``rates`` (n, 3);
+        ``effect_ms``/``effect_rays``/``embree_ms`` (3,) the trace stage's counters per effect."""
+        expected = np.asarray(expected_rays, np.float64) * np.where(np.asarray(rates) > 0, rates, 1.0)
+        item_rays = np.nan_to_num(np.asarray(item_rays, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        chosen = np.asarray(chosen, bool)
+        for i, j in zip(*np.nonzero(chosen & (expected > 0) & (item_rays > 0))):
+            key = (names[i], EFFECTS[j])
+            value = float(np.clip(item_rays[i, j] / expected[i, j], *RATIO_RANGE))
+            old = self.ratio.get(key)
+            self.ratio[key] = value if old is None else old + RATIO_SMOOTHING * (value - old)
+        for j, effect in enumerate(EFFECTS):
+            ms, rays = float(effect_ms[j]), float(effect_rays[j])
+            if not (chosen[:, j].any() and np.isfinite(ms) and ms > 0 and rays > 0):
+                continue
+            setup = float(shadow_setup_ms) if effect == "shadows" and np.isfinite(shadow_setup_ms) else 0.0
+            inside = float(embree_ms[j]) if np.isfinite(embree_ms[j]) else 0.0
+            self.samples[effect].append((rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms)))
+            self._fit[effect] = _fit(self.samples[effect], effect == "shadows")
+            measured = [v for (name, e), v in self.ratio.items() if e == effect]
+            if measured:
+                self._pooled[j] = float(np.median(measured))
+
+
+def _fit(samples, timed_setup: bool) -> tuple[float, float]:
+    """(fixed ms, ms per ray) from a window of (rays, ms, setup ms, Embree ms)."""
+    data = np.asarray(samples, np.float64)
+    rays, ms, setup, inside = data.T
+    if len(data) >= 4 and rays.max() >= SPREAD * rays.min():
+        i, j = np.triu_indices(len(data), 1)
+        apart = rays[j] != rays[i]
+        per_ray = float(np.median((ms[j] - ms[i])[apart] / (rays[j] - rays[i])[apart]))
+    else:
+        per_ray = EMBREE_FACTOR * float(np.median(inside / rays))
+    per_ray = max(per_ray, 0.0)
+    low = float(np.median(setup)) if timed_setup else 0.0
+    fixed = float(np.clip(np.median(ms - per_ray * rays), low, max(float(ms.min()), low)))
+    if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms per ray
+        per_ray = float(np.median(np.maximum(ms - fixed, 0.0) / rays))
+    return fixed, per_ray
