@@ -48,6 +48,9 @@ class TracedTerms:
     reflection: dict = field(default_factory=dict)
     # (pixels, (n, 3) radiance arriving through the transparent layer), or None
     refraction: tuple | None = None
+    # (layer, light index) -> (pixels, caster element indices, (casters, pixels) bool: which
+    # casters' shadow regions hold each pixel): who a traced shadow change belongs to
+    shadow_owners: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -121,20 +121,41 @@ def shadow_differences(snapshot, layers, change, traced, casting, element_bounds
     if casters:
         shadow_change = flat_change[:, 1]
         charged = np.zeros(len(flat_change), bool)
-        for (layer_name, light_index), (where, _) in traced.shadow_visibility.items():
+        for key, (where, _) in traced.shadow_visibility.items():
+            layer_name, light_index = key
             where = where[(shadow_change[where] > 0) & ~charged[where]]
             if len(where) == 0:
                 continue
             charged[where] = True  # a pixel's change (all lights) is shared once
-            pixels = layers[layer_name]
-            position = np.full((len(flat_change), 3), np.nan)
-            position[pixels.flat] = pixels.world()
-            index = ShadowRegionIndex(snapshot.lights[light_index], position[where])
-            owners = np.stack([index.region(element_bounds[caster]) for caster in casters])
+            owners = _owners_from_trace(traced.shadow_owners.get(key), where, casters, len(flat_change))
+            if owners is None:  # regions not kept by the trace stage: built again here
+                pixels = layers[layer_name]
+                position = np.full((len(flat_change), 3), np.nan)
+                position[pixels.flat] = pixels.world()
+                index = ShadowRegionIndex(snapshot.lights[light_index], position[where])
+                owners = np.stack([index.region(element_bounds[caster]) for caster in casters])
             shares = owners.sum(axis=0)
             weights = np.where(shares > 0, shadow_change[where] / np.maximum(shares, 1), 0.0)
             difference[casters] += owners.astype(np.float64) @ weights
     return difference
+
+
+def _owners_from_trace(kept, where, casters, n_pixels):
+    """(casters, len(where)) bool: which casters' regions hold each pixel of ``where``, from the
+    regions the trace stage built (``TracedTerms.shadow_owners``); None without them."""
+    if kept is None:
+        return None
+    flat, traced_casters, regions = kept
+    row_of = {caster: row for row, caster in enumerate(traced_casters)}
+    if any(caster not in row_of for caster in casters):
+        return None
+    position = np.full(n_pixels, -1, np.int64)
+    position[flat] = np.arange(len(flat))
+    at = position[where]
+    found = at >= 0
+    owners = np.zeros((len(casters), len(where)), bool)
+    owners[:, found] = regions[[row_of[caster] for caster in casters]][:, at[found]]
+    return owners
 
 
 class BenefitModel:

@@ -251,6 +251,8 @@ class TraceStage:
                 traced.shadow_visibility[(layer_name, light_index)] = filled(
                     "shadows", layer_name, pixels, idx, cast, np.where(blocked, 0.0, 1.0).astype(np.float32),
                     pixel_rate)
+                traced.shadow_owners[(layer_name, light_index)] = (
+                    pixels.flat[idx], list(casters), np.stack([region[idx] for region in caster_regions]))
                 counters.shadow_rays += len(ray_idx)
                 # A ray in overlapping casters' regions is shared between them.
                 _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region
