@@ -114,7 +114,8 @@ class FrameRenderer:
         # item visible now has no prior yet, or the cached ones are PRIOR_EVERY frames old (a frame
         # that traces reads the layers anyway, after the selection).
         need_priors = use_benefit and self.benefit_selector.needs_priors(
-            [e.name for e in snapshot.elements], candidate & (area_px > 0))
+            [e.name for e in snapshot.elements], candidate & (area_px > 0)) and not self._no_time_to_trace(
+            settings, raster.raster_ms - raster.setup_ms)
         if learn_benefit or need_priors:
             start = _timer()
             layers = read_layers()
@@ -257,6 +258,13 @@ class FrameRenderer:
                            selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
 
     # ------------------------------------------------------------------
+    def _no_time_to_trace(self, settings, raster_ms) -> bool:
+        """A budget in ms whose time left after this frame's raster half cannot pay the trace
+        stage's measured fixed overhead: the BENEFIT priors (a read-back) would buy nothing."""
+        overhead = self.cost_model.trace_overhead_ms()
+        return getattr(settings, "budget_at", None) is None and overhead > 0 and \
+            self.cost_model.time_left(settings.budget_ms, max(raster_ms, 0.0)) <= overhead
+
     def _choose_items(self, selection, frame_elements, priors, pixels, effect_rays, tiers=False):
         """The BENEFIT selection of this frame: (ItemChoice, the SelectionResult it becomes).  The
         result keeps the paper's terms for the log; its elements' effect flags and rays per pixel
@@ -271,7 +279,8 @@ class FrameRenderer:
                                           frame_elements.rt_cost)
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
                                               cost_ms, selection.time_left_ms, overhead, tiers=tiers,
-                                              fixed_ms=self.item_costs.fixed_ms())
+                                              fixed_ms=self.item_costs.fixed_ms(),
+                                              unmeasured=self.item_costs.unmeasured())
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)

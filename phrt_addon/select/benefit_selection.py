@@ -151,16 +151,25 @@ class BenefitSelector:
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
-               tiers: bool = False, fixed_ms=None) -> ItemChoice:
+               tiers: bool = False, fixed_ms=None, unmeasured=None) -> ItemChoice:
         """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
         ``cost_ms`` each item's predicted ms at full rate (``item_costs``, Q included);
-        ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced.
+        ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced;
+        ``unmeasured`` (3,) bool, effects whose cost was never measured: one item of each (the
+        most valuable per predicted ms) is the probe, the others wait for its measurement.
         ``tiers``: each item may be bought at full, half or quarter rate (``TIER_RATES``)."""
         eligible = np.asarray(eligible, bool)
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
         value = np.where(eligible, np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
         cost = np.clip(np.nan_to_num(np.asarray(cost_ms, np.float64), nan=np.inf, posinf=np.inf), 0.0, np.inf)
+        if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
+            for j in np.flatnonzero(np.asarray(unmeasured, bool) & eligible.any(axis=0)):
+                ratio = np.where(eligible[:, j], value[:, j] / np.maximum(cost[:, j], 1e-12), -1.0)
+                probe = np.zeros(len(eligible), bool)
+                probe[int(np.argmax(ratio))] = True
+                eligible = eligible.copy()
+                eligible[:, j] &= probe
         self.frames += 1
         available = max(float(time_left_ms) - float(overhead_ms), 0.0)
         margin = self.margin_ms(available)

@@ -60,6 +60,10 @@ class ItemCosts:
     def per_ray_ms(self) -> np.ndarray:
         return np.array([self._fit[effect][1] for effect in EFFECTS])
 
+    def unmeasured(self) -> np.ndarray:
+        """(3,) bool: the effects never measured in this replay."""
+        return np.array([not self.samples[effect] for effect in EFFECTS])
+
     def measured(self, chosen) -> bool:
         """Whether every effect with a chosen item (``chosen`` (n, 3)) has been measured."""
         return all(self.samples[effect] for j, effect in enumerate(EFFECTS) if np.any(np.asarray(chosen)[:, j]))

@@ -199,3 +199,18 @@ def test_the_material_priors_are_computed_only_when_an_item_has_none_or_they_are
     selector.frames += benefit_selection.PRIOR_EVERY
     assert selector.needs_priors(["A", "B"], visible)  # old
     assert not selector.needs_priors(["A", "B"], np.array([False, False]))  # nothing visible: nothing to read
+
+
+def test_an_effect_never_measured_is_probed_with_one_item():
+    """The first frame of an effect traces its most valuable item per predicted ms alone: the
+    costs of the others are guesses until that measurement (a replay's start would otherwise
+    select everything at the priors' price and drop most of it a frame later: popping)."""
+    selector = BenefitSelector()
+    names = ["A", "B", "C"]
+    pixels = np.array([[0, 100, 0], [0, 300, 0], [0, 200, 0]], float)
+    priors = np.full((3, 3), 0.5)
+    cost = np.array([[0, 1.0, 0], [0, 2.0, 0], [0, 4.0, 0]], float)
+    args = (names, pixels > 0, pixels, priors, np.ones(3), cost, 100.0, 0.0)
+    probe = selector.choose(*args, unmeasured=np.array([True, True, True]))
+    assert probe.chosen[:, 1].tolist() == [False, True, False]  # B: 150 per ms, A 50, C 25
+    assert selector.choose(*args, unmeasured=np.zeros(3, bool)).chosen[:, 1].all()
