@@ -213,7 +213,8 @@ class FrameRenderer:
                     choice.chosen, choice.rate, [counters.shadow_ms, counters.reflection_ms, counters.refraction_ms],
                     [counters.shadow_rays, counters.reflection_rays, counters.refraction_rays],
                     shadow_setup_ms=counters.shadow_setup_ms,
-                    embree_ms=[counters.shadow_embree_ms, counters.reflection_embree_ms, counters.refraction_embree_ms])
+                    embree_ms=[counters.shadow_embree_ms, counters.reflection_embree_ms, counters.refraction_embree_ms],
+                    reconstruct_ms=counters.reconstruct_ms, reconstructed_px=counters.reconstructed_px)
             select_ms += _ms(start)
         elif measure:
             # The error-aware relevance learns what tracing changed, measured on the GPU beside the
@@ -280,7 +281,10 @@ class FrameRenderer:
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
                                               cost_ms, selection.time_left_ms, overhead, tiers=tiers,
                                               fixed_ms=self.item_costs.fixed_ms(),
-                                              unmeasured=self.item_costs.unmeasured())
+                                              unmeasured=self.item_costs.unmeasured(),
+                                              tier_costs=self.item_costs.tier_costs(
+                                                  frame_elements.names, _expected_rays(frame_elements.area_px, effect_rays),
+                                                  pixels, frame_elements.rt_cost) if tiers else None)
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)

@@ -31,7 +31,7 @@ DEFAULT_PATHS = "arcade/path3,atrium/path2,atrium/path3,showcase/orbit"
 DEFAULT_BUDGETS = "0.1,0.25,0.5,0.75,0.9"
 DEFAULT_VARIANTS = "measured,error,benefit"
 COLUMNS = ("path", "variant", "budget_at", "budget_ms", "captured", "captured_lo", "captured_hi", "judged_frames",
-           "popping", "p95_over_budget", "within_budget", "flip", "mean_ms", "first_frame_ms")
+           "popping", "item_popping", "p95_over_budget", "within_budget", "flip", "mean_ms", "first_frame_ms")
 ORBIT_RADIUS = 9.0
 ORBIT_HEIGHT = 3.5
 
@@ -108,15 +108,16 @@ def _number(text, spec):
 
 
 def markdown(table) -> str:
-    lines = ["| Path | Variant | Budget at | Budget ms | Captured [90%] | Judged | Pops / 100 frames | p95 / budget "
-             "| Within budget |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| Path | Variant | Budget at | Budget ms | Captured [90%] | Judged | LDR-FLIP | Pops / 100 frames "
+             "| of which items | p95 / budget | Within budget |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in table:
         interval = (f" [{_number(row['captured_lo'], '.2f')}, {_number(row['captured_hi'], '.2f')}]"
                     if row["captured_lo"] not in ("", None) else "")
         within = "–" if row["within_budget"] in ("", None) else f"{100 * float(row['within_budget']):.0f}%"
         lines.append(f"| {row['path']} | {row['variant']} | {_number(row['budget_at'], '.2f')} | "
                      f"{_number(row['budget_ms'], '.0f')} | {_number(row['captured'], '.2f')}{interval} | "
-                     f"{row['judged_frames']} | {_number(row['popping'], '.1f')} | "
+                     f"{row['judged_frames']} | {_number(row['flip'], '.4f')} | {_number(row['popping'], '.1f')} | "
+                     f"{_number(row.get('item_popping'), '.1f')} | "
                      f"{_number(row['p95_over_budget'], '.2f')} | {within} |")
     return "\n".join(lines) + "\n"
 

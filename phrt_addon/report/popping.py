@@ -11,7 +11,11 @@ Element`` pass) and measures
 
 i.e. how much more those pixels change from one frame to the next than they
 change in the reference (which moves with the camera too, but never switches).
-Near 0: the switch is invisible beyond the motion; large: a visible pop.  An
+Near 0: the switch is invisible beyond the motion; large: a visible pop.  Under the
+``BENEFIT`` selection an element traced in both frames also pops when what is traced of it
+changes (its effects, or with quality tiers its rate): such pops have ``kind`` ``items`` and
+count in the total like a switch between raster and traced (``kind`` ``state``), and are
+also reported on their own (``per_100_frames("items")``).  An
 element entering or leaving the view also flips, and then pops as much as the
 reference changes: about 0.
 
@@ -44,6 +48,7 @@ class Pop:
     pixels: int
     run_flip: float
     reference_flip: float
+    kind: str = "state"  # "state": raster <-> traced; "items": the traced effects or rate changed
 
     @property
     def popping(self) -> float:
@@ -68,11 +73,11 @@ class PoppingResult:
             table[pop.element] = (flips + 1, total + pop.popping)
         return table
 
-    def per_100_frames(self) -> float | None:
-        """Summed popping of all flips per 100 frames of the run."""
+    def per_100_frames(self, kind: str | None = None) -> float | None:
+        """Summed popping of all flips (of one ``kind`` if given) per 100 frames of the run."""
         if not self.measured or self.frame_count == 0:
             return None
-        return 100.0 * sum(pop.popping for pop in self.pops) / self.frame_count
+        return 100.0 * sum(pop.popping for pop in self.pops if kind in (None, pop.kind)) / self.frame_count
 
     def flips_per_100_frames(self) -> float | None:
         if self.frame_count == 0:
@@ -117,8 +122,11 @@ def measure_popping(run_dir, reference_dir, selection_rows=None, reference_maps=
     reference_maps = {} if reference_maps is None else reference_maps
     rows = run_files.read_selection(run_dir) if selection_rows is None else selection_rows
     by_frame = {}
+    traced_as = {}  # (frame, element) -> (effects, rate) where the row says (BENEFIT)
     for row in rows:
         by_frame.setdefault(int(row["frame"]), []).append((str(row["element"]), bool(row["selected"])))
+        if row.get("effects") is not None or row.get("rate") is not None:
+            traced_as[(int(row["frame"]), str(row["element"]))] = (str(row.get("effects") or ""), row.get("rate"))
     frames = sorted(set(by_frame) | {int(row["frame"]) for row in run_files.read_frames(run_dir)})
     result = PoppingResult(frame_count=len(frames))
     first = run_files.frame_image_path(run_dir, frames[0]) if frames else None
@@ -136,6 +144,11 @@ def measure_popping(run_dir, reference_dir, selection_rows=None, reference_maps=
         state_after = dict(by_frame.get(after, ()))
         flipped = sorted(name for name in set(state_before) | set(state_after)
                          if state_before.get(name, False) != state_after.get(name, False))
+        changed = sorted(name for name in set(state_before) & set(state_after)
+                         if state_before[name] and state_after[name]
+                         and traced_as.get((before, name)) != traced_as.get((after, name)))
+        kinds = {**{name: "state" for name in flipped}, **{name: "items" for name in changed}}
+        flipped = sorted(kinds)
         if not flipped:
             continue
         pair = run_frames.get(before), run_frames.get(after)
@@ -152,7 +165,7 @@ def measure_popping(run_dir, reference_dir, selection_rows=None, reference_maps=
                 mask |= pair[1][1] == index_after[name]
             pixels = int(mask.sum())
             if pixels == 0:
-                result.pops.append(Pop(after, name, state_after.get(name, False), 0, 0.0, 0.0))
+                result.pops.append(Pop(after, name, state_after.get(name, False), 0, 0.0, 0.0, kinds[name]))
                 continue
             window = _crop(mask)
             inside = mask[window]
@@ -163,5 +176,5 @@ def measure_popping(run_dir, reference_dir, selection_rows=None, reference_maps=
                 reference_maps[key] = metrics.flip_map(reference_pair[0][0][window], reference_pair[1][0][window])
             reference_map = reference_maps[key]
             result.pops.append(Pop(after, name, state_after.get(name, False), pixels,
-                                   float(run_map[inside].mean()), float(reference_map[inside].mean())))
+                                   float(run_map[inside].mean()), float(reference_map[inside].mean()), kinds[name]))
     return result

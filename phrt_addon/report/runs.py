@@ -30,7 +30,7 @@ METRIC_THREADS = max(2, min(4, os.cpu_count() or 1))
 
 # sweep.csv: the contract's columns first, then what tells the curves apart.
 SWEEP_COLUMNS = ("run", "mode", "cost_mode", "budget_ms", "mean_ms", "p95_ms", "flip", "relmse", "psnr", "regret",
-                 "flips_per_100", "popping", "scene", "path", "variant", "budget_at", "selection_weight",
+                 "flips_per_100", "popping", "item_popping", "scene", "path", "variant", "budget_at", "selection_weight",
                  "selection_order", "relevance", "frames", "mean_selected", "regret_frames", "regret_share",
                  "captured", "captured_lo", "captured_hi", "judged_frames", "min_regret", "beat_oracle",
                  "p95_over_budget", "within_budget", "first_frame_ms", "variant_name")

@@ -147,6 +147,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
             "regret": regret.mean if regret is not None else None,
             "flips_per_100": float(rates.mean()) if rates.size else 0.0,
             "popping": pop.per_100_frames() if pop is not None else None,
+            "item_popping": pop.per_100_frames("items") if pop is not None else None,
             "scene": run.scene, "path": run.path,
             "variant": variant_label(run.variant) if hybrid else run.mode.lower(),
             "budget_at": run.budget_at if hybrid else None,

@@ -64,12 +64,14 @@ DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
 # Quality tiers (issue 23): the rates an item may be traced at, the share of its full-rate
-# benefit each keeps and the share of its full-rate cost each takes (rays scale; the edge-aware
-# reconstruction does not: priors from the reconstruction's measurements, tests/core/test_trace_rates.py
-# and trace/rates.py, not learned per item yet).
+# benefit each keeps and the share of its full-rate cost each takes: priors (from the
+# reconstruction's measurements, tests/core/test_trace_rates.py), replaced per effect and rate by
+# what is measured (BenefitSelector.keep; item_costs.ItemCosts.tier_costs).
 TIER_RATES = (1.0, 0.5, 0.25)
 TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
 TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
+KEEP_SMOOTHING = 0.1
+KEEP_RANGE = (0.05, 1.0)
 MARGIN_FRAMES = 20
 MARGIN_QUANTILE = 80
 MARGIN_MIN_SAMPLES = 5
@@ -125,6 +127,8 @@ class BenefitSelector:
         self.prior_cache: dict[str, np.ndarray] = {}  # element name -> (3,) its last computed priors
         self.priors_at = None  # self.frames when the priors were last computed
         self.errors: deque = deque(maxlen=MARGIN_FRAMES)  # (frame count, measured - predicted ms)
+        self.kept: dict[tuple[str, float], float] = {}  # (effect, rate) -> learned share of the benefit
+        self.measured_at: dict[tuple[str, str], float] = {}  # item -> the rate of its last measurement
         self.frames = 0
 
     # -- the decision ------------------------------------------------------------
@@ -151,13 +155,15 @@ class BenefitSelector:
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
-               tiers: bool = False, fixed_ms=None, unmeasured=None) -> ItemChoice:
+               tiers: bool = False, fixed_ms=None, unmeasured=None, tier_costs=None) -> ItemChoice:
         """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
         ``cost_ms`` each item's predicted ms at full rate (``item_costs``, Q included);
         ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced;
         ``unmeasured`` (3,) bool, effects whose cost was never measured: one item of each (the
         most valuable per predicted ms) is the probe, the others wait for its measurement.
-        ``tiers``: each item may be bought at full, half or quarter rate (``TIER_RATES``)."""
+        ``tiers``: each item may be bought at full, half or quarter rate (``TIER_RATES``), at
+        ``tier_costs`` (n, 3, len(TIER_RATES)) ms (``item_costs.tier_costs``; None: the full cost
+        x ``TIER_COST``)."""
         eligible = np.asarray(eligible, bool)
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
@@ -190,8 +196,11 @@ class BenefitSelector:
         fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
             np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
         rate = np.zeros(eligible.shape)
+        if tier_costs is None:
+            tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
+        tier_costs = np.clip(np.nan_to_num(np.asarray(tier_costs, np.float64), nan=np.inf), 0.0, np.inf)
         if tiers:  # the fixed parts of every effect with an item are paid up front
-            rate = self._choose_rates(names, eligible, value, bonus, was, cost,
+            rate = self._choose_rates(names, eligible, value, bonus, was, tier_costs,
                                       max(capacity - float(fixed[eligible.any(axis=0)].sum()), 0.0))
             chosen = rate > 0
         else:
@@ -201,17 +210,21 @@ class BenefitSelector:
                                           np.tile(np.arange(len(EFFECTS)), len(eligible)), fixed, capacity)
             chosen = flat.reshape(eligible.shape) & eligible
             rate[chosen] = 1.0
-        share = np.zeros(eligible.shape)
-        for tier, cost_share in TIER_COST.items():
-            share[rate == tier] = cost_share
-        spent = np.where(chosen, cost * share, 0.0)
+        spent = np.zeros(eligible.shape)
+        for option, tier in enumerate(TIER_RATES):
+            spent = np.where(chosen & (rate == tier), tier_costs[:, :, option], spent)
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
                           per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin, rate=rate,
                           chosen_cost_ms=spent, fixed_ms=float(fixed[chosen.any(axis=0)].sum()))
 
-    def _choose_rates(self, names, eligible, value, bonus, was, cost, capacity) -> np.ndarray:
+    def keep(self, effect: str, tier: float) -> float:
+        """The share of an item's full-rate benefit a rate keeps: learned per effect and rate from
+        items measured at that rate right after a full-rate measurement, ``TIER_KEEP`` before."""
+        return self.kept.get((effect, tier), TIER_KEEP[tier])
+
+    def _choose_rates(self, names, eligible, value, bonus, was, tier_costs, capacity) -> np.ndarray:
         """(n, 3) rate per item (0: not traced) by the multiple-choice knapsack over TIER_RATES:
-        an option's value is the item's value x TIER_KEEP, its cost the full cost x TIER_COST; the
+        an option's value is the item's value x its kept share, its cost ``tier_costs``; the
         switching cost counts a change of rate like a change of state; shadows only at full rate."""
         items = np.argwhere(eligible)
         n_options = len(TIER_RATES)
@@ -224,8 +237,8 @@ class BenefitSelector:
                     continue
                 same = was[i, j] and before == tier
                 factor = (1.0 + SWITCH) if same else (1.0 if was[i, j] else 1.0 - SWITCH)
-                values[row, option] = value[i, j] * TIER_KEEP[tier] * factor + bonus[i, j]
-                costs[row, option] = cost[i, j] * TIER_COST[tier] * (1.0 if same else 1.0 + ADD_SLACK)
+                values[row, option] = value[i, j] * self.keep(EFFECTS[j], tier) * factor + bonus[i, j]
+                costs[row, option] = tier_costs[i, j, option] * (1.0 if same else 1.0 + ADD_SLACK)
         picked = knapsack.solve_choices(values, costs, capacity)
         rate = np.zeros(eligible.shape)
         for row, option in enumerate(picked.tolist()):
@@ -246,10 +259,17 @@ class BenefitSelector:
                 if not choice.eligible[i, j]:
                     continue
                 if chosen[i, j] and measured is not None and pixels is not None and pixels[i, j] > 0:
-                    # What a reduced rate changed, as the full rate's estimate (its share TIER_KEEP).
-                    keep = TIER_KEEP.get(float(choice.rate[i, j]), 1.0) if choice.rate is not None else 1.0
-                    value = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j] / keep), 0.0, MAX_VALUE))
+                    tier = float(choice.rate[i, j]) if choice.rate is not None else 1.0
+                    seen = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j]), 0.0, MAX_VALUE))
                     old = self.estimates.get(key)
+                    if tier < 1.0 and old is not None and old > 0 and self.measured_at.get(key) == 1.0:
+                        # Measured at a reduced rate right after a full-rate measurement: the share kept.
+                        share = float(np.clip(seen / old, KEEP_RANGE[0], KEEP_RANGE[1]))
+                        before = self.keep(effect, tier)
+                        self.kept[(effect, tier)] = before + KEEP_SMOOTHING * (share - before)
+                    self.measured_at[key] = tier
+                    # What a reduced rate changed, as the full rate's estimate (over its kept share).
+                    value = float(np.clip(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0, MAX_VALUE))
                     self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
                     self.observations[key] = self.observations.get(key, 0) + 1
                     self.waited.pop(key, None)

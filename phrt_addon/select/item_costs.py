@@ -21,6 +21,12 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   it (``TraceResult.item_rays``, an EMA); an item never traced takes the median ratio of the
   effect's measured items (1 before any), so one caster's measurement corrects all of them.
 
+At a reduced rate (quality tiers) an item casts that share of its rays and its other pixels are
+reconstructed: its cost is the per-ray part times the rate plus the reconstruction's learned ms
+per pixel (``TraceCounters.reconstruct_ms`` / ``reconstructed_px``, the median of the window)
+times the pixels not cast; before the first reconstruction is measured, the full cost times the
+prior share ``TIER_COST``.  The fixed part is the same at every rate.
+
 Q (``rt_cost``) scales an item's cost; it never adds a hidden margin.  Plain numpy, no bpy.
 """
 from __future__ import annotations
@@ -30,6 +36,7 @@ from collections import deque
 import numpy as np
 
 from ..schema import EFFECTS
+from .benefit_selection import TIER_COST, TIER_RATES
 from .cost_model import MS_PER_RAY_PRIOR, UNMEASURED_MARGIN
 
 WINDOW = 32
@@ -51,6 +58,7 @@ class ItemCosts:
         self.ratio: dict[tuple[str, str], float] = {}
         self._fit = {effect: (0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN) for effect in EFFECTS}
         self._pooled = np.ones(len(EFFECTS))
+        self.reconstruction = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # ms per pixel
 
     # -- predictions -------------------------------------------------------------------------
     def fixed_ms(self) -> np.ndarray:
@@ -85,9 +93,24 @@ class ItemCosts:
         ms = rays * self.per_ray_ms()[None, :] * np.asarray(rt_cost, np.float64).reshape(-1, 1)
         return np.clip(np.nan_to_num(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
+    def tier_costs(self, names, expected_rays, pixels, rt_cost) -> np.ndarray:
+        """(n, 3, len(TIER_RATES)) ms of each item at each rate of ``TIER_RATES``."""
+        full = self.predict(names, expected_rays, rt_cost)
+        out = np.empty(full.shape + (len(TIER_RATES),))
+        pixels = np.nan_to_num(np.asarray(pixels, np.float64), nan=0.0, posinf=0.0)
+        q = np.asarray(rt_cost, np.float64).reshape(-1, 1)
+        for j, effect in enumerate(EFFECTS):
+            per_pixel = float(np.median(self.reconstruction[effect])) if self.reconstruction[effect] else None
+            for option, rate in enumerate(TIER_RATES):
+                if per_pixel is None or rate >= 1.0:
+                    out[:, j, option] = full[:, j] * TIER_COST[rate]
+                else:
+                    out[:, j, option] = full[:, j] * rate + per_pixel * pixels[:, j] * (1.0 - rate) * q[:, 0]
+        return np.clip(np.nan_to_num(out, nan=MAX_MS, posinf=MAX_MS), 0.0, MAX_MS)
+
     # -- learning ------------------------------------------------------------------------------
     def observe(self, names, expected_rays, item_rays, chosen, rates, effect_ms, effect_rays,
-                shadow_setup_ms=0.0, embree_ms=(0.0, 0.0, 0.0)) -> None:
+                shadow_setup_ms=0.0, embree_ms=(0.0, 0.0, 0.0), reconstruct_ms=None, reconstructed_px=None) -> None:
         """A traced frame: ``expected_rays``/``item_rays``/``chosen``/``rates`` (n, 3);
         ``effect_ms``/``effect_rays``/``embree_ms`` (3,) the trace stage's counters per effect."""
         expected = np.asarray(expected_rays, np.float64) * np.where(np.asarray(rates) > 0, rates, 1.0)
@@ -100,6 +123,11 @@ class ItemCosts:
             self.ratio[key] = value if old is None else old + RATIO_SMOOTHING * (value - old)
         for j, effect in enumerate(EFFECTS):
             ms, rays = float(effect_ms[j]), float(effect_rays[j])
+            spent = float((reconstruct_ms or {}).get(effect, 0.0))
+            filled_px = float((reconstructed_px or {}).get(effect, 0))
+            if filled_px > 0 and np.isfinite(spent) and 0 <= spent <= ms:
+                self.reconstruction[effect].append(spent / filled_px)
+                ms -= spent  # what is left is rays and the fixed part
             if not (chosen[:, j].any() and np.isfinite(ms) and ms > 0 and rays > 0):
                 continue
             setup = float(shadow_setup_ms) if effect == "shadows" and np.isfinite(shadow_setup_ms) else 0.0

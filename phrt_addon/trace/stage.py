@@ -98,6 +98,10 @@ class TraceCounters:
     shadow_embree_ms: float = 0.0
     reflection_embree_ms: float = 0.0
     refraction_embree_ms: float = 0.0
+    # Per effect name, of its ms the edge-aware reconstruction of pixels not cast at a reduced
+    # rate, and how many pixels it filled (its cost per pixel: select/item_costs.py).
+    reconstruct_ms: dict = field(default_factory=dict)
+    reconstructed_px: dict = field(default_factory=dict)
 
     @property
     def rays(self):
@@ -191,9 +195,12 @@ class TraceStage:
             traced ``values`` at ``idx[cast]``, the others reconstructed."""
             flat = pixels.flat[idx]
             if not np.all(cast):
+                begin = time.perf_counter()
                 if layer_name not in guides:
                     guides[layer_name] = layer_guide(pixels.layer)
                 out = reconstruct(flat, flat[cast], values, guides[layer_name], width, pixel_rate)
+                counters.reconstruct_ms[effect] = counters.reconstruct_ms.get(effect, 0.0) + _ms(begin)
+                counters.reconstructed_px[effect] = counters.reconstructed_px.get(effect, 0) + int(np.count_nonzero(~cast))
                 pixel_rate = pixel_rate[np.searchsorted(flat, out.flat)]
                 flat, values = out.flat, out.values.astype(values.dtype)
             np.maximum.at(effect_rate[effect], flat, np.broadcast_to(pixel_rate, flat.shape).astype(np.float32))

@@ -1,5 +1,7 @@
 """The BENEFIT selection (select/benefit_selection.py): value, switching cost, exploration, the
 margin, and a frame rendered with it (items traced per effect, rows with their estimates)."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -214,3 +216,20 @@ def test_an_effect_never_measured_is_probed_with_one_item():
     probe = selector.choose(*args, unmeasured=np.array([True, True, True]))
     assert probe.chosen[:, 1].tolist() == [False, True, False]  # B: 150 per ms, A 50, C 25
     assert selector.choose(*args, unmeasured=np.zeros(3, bool)).chosen[:, 1].all()
+
+
+def test_the_share_a_reduced_rate_keeps_is_learned_per_effect():
+    """A mirror measured at full rate, then at quarter rate keeping 40% of that change: the
+    quarter rate's share of a reflection moves from its prior towards 0.4, and the full-rate
+    estimate is what the quarter-rate measurement implies under the learned share."""
+    selector = BenefitSelector()
+    names, pixels, priors, cost = ["M"], np.array([[0, 100, 0]], float), np.full((1, 3), 0.5), [[0, 4, 0]]
+    full = choose(selector, names, pixels, priors, cost, 100.0)
+    selector.observe(names, full, priors, np.array([[0, 50.0, 0]]), pixels)  # 0.5 a pixel at full rate
+    before = selector.keep("reflections", 0.25)
+    quarter = dataclasses.replace(full, rate=np.array([[0, 0.25, 0]]))
+    selector.observe(names, quarter, priors, np.array([[0, 20.0, 0]]), pixels)  # 0.2: a 40% share
+    after = selector.keep("reflections", 0.25)
+    assert before == benefit_selection.TIER_KEEP[0.25]
+    assert 0.4 < after < before
+    assert selector.keep("refractions", 0.25) == before  # per effect

@@ -63,3 +63,32 @@ def test_bad_numbers_are_not_learned():
     assert not costs.samples["shadows"] and not costs.ratio
     ms = costs.predict(["A"], np.array([[np.inf, np.nan, 1.0]]), [1.0])
     assert np.all(np.isfinite(ms)) and np.all(ms >= 0)
+
+
+def test_a_reduced_rate_costs_its_share_of_the_rays_plus_its_reconstruction():
+    """Issue 23: the learned quarter-rate cost is about a quarter of the per-ray part plus the
+    reconstruction of the other three quarters; the fixed part is the same at every rate."""
+    costs = ItemCosts()
+    names = ["Mirror"]
+    expected = np.array([[0.0, 4000.0, 0.0]])
+    pixels = np.array([[0.0, 2000.0, 0.0]])
+    # Before any reconstruction is measured: the priors' shares of the full cost.
+    prior = costs.tier_costs(names, expected, pixels, [1.0])
+    full = costs.predict(names, expected, [1.0])[0, 1]
+    assert prior[0, 1].tolist() == pytest.approx([full * item_costs.TIER_COST[r] for r in item_costs.TIER_RATES])
+    for rate, rays, ms, recon in ((1.0, 4000, 2.0 + 4000 * 5e-4, 0.0), (0.25, 1000, 2.0 + 1000 * 5e-4 + 1.5, 1.5),
+                                  (1.0, 4000, 2.0 + 4000 * 5e-4, 0.0), (0.5, 2000, 2.0 + 2000 * 5e-4 + 1.0, 1.0),
+                                  (0.25, 1000, 2.0 + 1000 * 5e-4 + 1.5, 1.5)):
+        filled = int(2000 * (1 - rate))
+        costs.observe(names, expected, np.array([[0, rays, 0]], float), np.array([[False, True, False]]),
+                      np.array([[0, rate, 0]]), [0, ms, 0], [0, rays, 0], embree_ms=[0, rays * 1e-4, 0],
+                      reconstruct_ms={"reflections": recon} if recon else {},
+                      reconstructed_px={"reflections": filled} if recon else {})
+    assert costs.per_ray_ms()[1] == pytest.approx(5e-4, rel=1e-6)
+    assert costs.fixed_ms()[1] == pytest.approx(2.0, rel=1e-6)
+    tiers = costs.tier_costs(names, expected, pixels, [1.0])[0, 1]
+    per_pixel = 1.5 / 1500  # the reconstruction's ms per pixel filled
+    by_rate = dict(zip(item_costs.TIER_RATES, tiers))
+    assert by_rate[1.0] == pytest.approx(4000 * 5e-4)
+    assert by_rate[0.25] == pytest.approx(0.25 * 4000 * 5e-4 + per_pixel * 1500)
+    assert by_rate[0.5] == pytest.approx(0.5 * 4000 * 5e-4 + per_pixel * 1000)

@@ -110,3 +110,20 @@ def test_runs_without_the_element_pass_are_noted(tmp_path):
                "embreex_version": "4.4.0.post1"})
     result = popping.measure_popping(run_dir, run_dir)
     assert not result.measured and "PHRT Element" in result.note and result.per_100_frames() is None
+
+
+def test_a_change_of_rate_or_effects_while_traced_is_an_items_pop(tmp_path):
+    """Under BENEFIT an element traced in both frames pops when its traced effects or its rate
+    change: counted with kind "items", in the total and on its own."""
+    reference = make_run(tmp_path, "raytrace", [(True, True)] * 4)
+    hybrid = make_run(tmp_path, "benefit", [(True, True)] * 4)
+    rows = []
+    for frame, (ball_rate, box_effects) in enumerate([(1.0, "reflections"), (0.25, "reflections"),
+                                                      (0.25, "reflections;shadows"), (0.25, "reflections;shadows")],
+                                                     start=1):
+        rows.append({"frame": frame, "element": "Ball", "selected": True, "effects": "reflections", "rate": ball_rate})
+        rows.append({"frame": frame, "element": "Box", "selected": True, "effects": box_effects, "rate": 1.0})
+    result = popping.measure_popping(hybrid, reference, selection_rows=rows)
+    assert [(pop.frame, pop.element, pop.kind) for pop in result.pops] == [(2, "Ball", "items"), (3, "Box", "items")]
+    assert result.per_100_frames("state") == 0.0
+    assert result.per_100_frames("items") == pytest.approx(result.per_100_frames())
