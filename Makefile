@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast test-compat bench paper soak faults extension scenes clean selection-eval
+.PHONY: demo test test-fast test-compat bench paper soak faults extension scenes clean selection-eval rate-flip
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -62,6 +62,12 @@ EVAL_FRAMES ?= 1-240
 EVAL_PATHS ?= arcade/path3,atrium/path2,atrium/path3,showcase/orbit
 selection-eval: $(STAMP)
 	$(PY) tools/selection_eval.py --out out/selection-eval --frames $(EVAL_FRAMES) --paths $(EVAL_PATHS)
+
+# What each quality-tier rate loses per effect on the judged paths (LDR-FLIP against full rate;
+# a picture of one frame at each rate): out/rate-flip/rate_flip.{csv,md}.  Minutes; after
+# selection-eval (it reuses that folder's orbiting showcase scene).
+rate-flip: $(STAMP)
+	$(PY) tools/rate_flip.py --out out/rate-flip --frames $(EVAL_FRAMES)
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes

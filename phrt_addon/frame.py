@@ -37,7 +37,7 @@ from .select import selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
-from .raster.gbuffer import element_pixel_stats
+from .raster.gbuffer import element_pixel_stats, front_points
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
@@ -71,8 +71,10 @@ class FrameRenderer:
         # The BENEFIT selection's per-item estimates and margin (phrt_addon/select/benefit_selection.py).
         self.benefit_selector = benefit_selection.BenefitSelector()
         self.item_costs = item_costs.ItemCosts()
-        # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None.
+        # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None;
+        # with it, per effect name the rate every element's effect is traced at (tools/rate_flip.py).
         self.forced_selection = None
+        self.forced_rates = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
 
     @property
@@ -178,7 +180,7 @@ class FrameRenderer:
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
                                                 effects=selection.effects,
-                                                rates=choice.rates if choice is not None else None)
+                                                rates=choice.rates if choice is not None else self._forced_rates(n_elements))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
 
@@ -198,12 +200,14 @@ class FrameRenderer:
         # PHRT Rate: per pixel the rate its traced terms came at (0: raster), rows bottom to top.
         passes.rate = traced_frame.rate if traced_frame.rate is not None else \
             np.zeros((raster.height, raster.width), np.float32)
+        passes.effect_rate = traced_frame.effect_rate or None
 
         if choice is not None:
             start = _timer()
             measured = item_benefit.measure(snapshot, layers, raster.traced_change(), traced, choice.chosen,
                                             element_bounds) if measure else None
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
+            self.item_costs.tick(choice.eligible.any(axis=0), choice.chosen.any(axis=0) & (traced is not None))
             if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
                 if self.cost_model.trace_overhead_ms() > 0 and self.item_costs.measured(choice.chosen):
                     self.benefit_selector.observe_time(selection.predicted_trace_ms,
@@ -259,6 +263,11 @@ class FrameRenderer:
                            selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
 
     # ------------------------------------------------------------------
+    def _forced_rates(self, n_elements):
+        if self.forced_selection is None or not self.forced_rates:
+            return None
+        return {effect: np.full(n_elements, float(rate)) for effect, rate in self.forced_rates.items()}
+
     def _no_time_to_trace(self, settings, raster_ms) -> bool:
         """A budget in ms whose time left after this frame's raster half cannot pay the trace
         stage's measured fixed overhead: the BENEFIT priors (a read-back) would buy nothing."""
@@ -345,35 +354,6 @@ class FrameRenderer:
         return footprint
 
     # ------------------------------------------------------------------
-
-
-def front_points(camera, view_depth, step) -> np.ndarray:
-    """World positions (float64) of every ``step``-th pixel in x and y with a surface, from its
-    distance along the view axis: on the pixel's ray, interpolated between its near and far
-    points (exact for perspective and orthographic views alike)."""
-    height, width = view_depth.shape
-    rows = np.arange(step // 2, height, step)
-    cols = np.arange(step // 2, width, step)
-    depth = np.asarray(view_depth, np.float64)[np.ix_(rows, cols)].ravel()
-    ys, xs = np.meshgrid((rows + 0.5) / height * 2.0 - 1.0, (cols + 0.5) / width * 2.0 - 1.0, indexing="ij")
-    covered = np.isfinite(depth)
-    if not np.any(covered):
-        return np.zeros((0, 3))
-    inverse = np.linalg.inv(np.asarray(camera.projection, np.float64) @ camera.view_matrix)
-    ndc = np.stack([xs.ravel()[covered], ys.ravel()[covered]], axis=1)
-
-    def unproject(z):
-        clip = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ inverse.T
-        return clip[:, :3] / clip[:, 3:4]
-
-    near, far = unproject(-1.0), unproject(1.0)
-    forward = camera.forward
-    near_depth = (near - camera.position) @ forward
-    far_depth = (far - camera.position) @ forward
-    along = (depth[covered] - near_depth) / np.where(np.abs(far_depth - near_depth) > 1e-30,
-                                                     far_depth - near_depth, 1.0)
-    points = near + (far - near) * along[:, None]
-    return points[np.all(np.isfinite(points), axis=1)]
 
 
 def clamp_finite(array: np.ndarray) -> np.ndarray:

@@ -48,8 +48,8 @@ class TracedTerms:
     reflection: dict = field(default_factory=dict)
     # (pixels, (n, 3) radiance arriving through the transparent layer), or None
     refraction: tuple | None = None
-    # (layer, light index) -> (pixels, caster element indices, (casters, pixels) bool: which
-    # casters' shadow regions hold each pixel): who a traced shadow change belongs to
+    # (layer, light index) -> (pixels, their indices in the layer, caster element indices, per
+    # caster its region over the layer's pixels): who a traced shadow change belongs to
     shadow_owners: dict = field(default_factory=dict)
 
 
@@ -62,6 +62,7 @@ class FramePasses:
     candidate: np.ndarray  # (h,w) float32, 1 on candidate elements' pixels
     element: np.ndarray | None = None  # (h,w) float32, front element index + 1 (0: none)
     rate: np.ndarray | None = None  # (h,w) float32, rate of the traced terms (1, 0.5, 0.25; 0: raster)
+    effect_rate: dict | None = None  # effect name -> (h,w) float32, the same per effect (not a pass)
 
 
 @dataclass

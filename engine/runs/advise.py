@@ -109,12 +109,6 @@ def _prospects(rows, elements, frame_px, cap):
     return items.choose_prospects(found, cap)
 
 
-def _competing(selection) -> list:
-    terms = selection.terms
-    mask = terms.candidate & terms.visible & terms.within_area
-    return [name for name, keep in zip(selection.names, mask.tolist()) if keep]
-
-
 def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGET_AT, resolution=None,
                  every=DEFAULT_EVERY, prospects_cap=items.DEFAULT_PROSPECTS, scene_label=None, should_stop=None,
                  budget_ms=()):
@@ -196,10 +190,10 @@ def advice_steps(scene, camera, frame_range, out_dir, *, budget_at=DEFAULT_BUDGE
                 renderer.render(frame, ())
                 _, _, warm = renderer.render(frame, ())
                 scope.trace_only({})
-                renderer.render(frame, _competing(warm))
+                renderer.render(frame, oracle_engine.competing_candidates(warm))
             scope.trace_only({})
             raster = item_measure.measure_subset(renderer, frame, (), reference, timings=1, per_pixel=True)
-            competing = [name for name in _competing(raster.selection) if name in effects_of]
+            competing = [name for name in oracle_engine.competing_candidates(raster.selection) if name in effects_of]
             frame_items = [(name, effect) for name in competing for effect in effects_of[name]]
             keys, cost, benefit, area = [], [], [], []
             for name, effect in frame_items:

@@ -54,15 +54,19 @@ class ForcedRenderer:
         render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
         return False
 
-    def render(self, frame, names):
+    def render(self, frame, names, rates=None):
+        """``rates``: per effect name the rate (``trace.rates.RATES``) every traced element's effect
+        is traced at (None: full)."""
         if self.scene.frame_current != frame:
             self.scene.frame_set(frame)
         self.state.renderer.forced_selection = frozenset(names)
+        self.state.renderer.forced_rates = dict(rates) if rates else None
         bpy.ops.render.render(write_still=False)
         result = self.state.last_result
         self.state.last_result = None
         if result is None:
             raise RuntimeError(f"frame {frame} was stopped while rendering")
+        self.last_passes = result.passes
         image = np.ascontiguousarray(result.passes.combined[::-1, :, :3], dtype=np.float32)
         return image, result.stats, result.selection
 
@@ -112,13 +116,13 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
             if count == 0:  # warm-up: shaders, shadow maps and Embree scenes are built once, not timed here
                 renderer.render(frame, ())
                 _, _, warm = renderer.render(frame, ())
-                renderer.render(frame, _competing(warm))
+                renderer.render(frame, competing_candidates(warm))
             raster, raster_stats, selection = renderer.render(frame, ())
             flip_raster = metrics.flip(reference, raster)
             shared = shared_of.get(frame)
             if shared is None:
                 shared = float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)
-            competing = _competing(selection)
+            competing = competing_candidates(selection)
             names, cut = oracle.cap_candidates(competing, _relevance(selection, competing), seed=frame)
             if cut:
                 capped[str(frame)] = [len(names), len(competing)]
@@ -179,7 +183,7 @@ def _relevance(selection, names) -> list:
     return [float(relevance[index[name]]) for name in names]
 
 
-def _competing(selection) -> list:
+def competing_candidates(selection) -> list:
     """Names of the frame's competing candidates (visible, tagged, within the area limit)."""
     terms = selection.terms
     mask = terms.candidate & terms.visible & terms.within_area

@@ -213,3 +213,32 @@ def resolution_problem(width: int, height: int, available: int | None = None) ->
         return None
     return (f"resolution {width}x{height} needs about {needed / 2**30:.1f} GiB for its G-buffer alone, more than "
             f"the {available / 2**30:.1f} GiB of memory available: give a smaller --resolution")
+
+
+def front_points(camera, view_depth, step) -> np.ndarray:
+    """World positions (float64) of every ``step``-th pixel in x and y with a surface, from its
+    distance along the view axis: on the pixel's ray, interpolated between its near and far
+    points (exact for perspective and orthographic views alike)."""
+    height, width = view_depth.shape
+    rows = np.arange(step // 2, height, step)
+    cols = np.arange(step // 2, width, step)
+    depth = np.asarray(view_depth, np.float64)[np.ix_(rows, cols)].ravel()
+    ys, xs = np.meshgrid((rows + 0.5) / height * 2.0 - 1.0, (cols + 0.5) / width * 2.0 - 1.0, indexing="ij")
+    covered = np.isfinite(depth)
+    if not np.any(covered):
+        return np.zeros((0, 3))
+    inverse = np.linalg.inv(np.asarray(camera.projection, np.float64) @ camera.view_matrix)
+    ndc = np.stack([xs.ravel()[covered], ys.ravel()[covered]], axis=1)
+
+    def unproject(z):
+        clip = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ inverse.T
+        return clip[:, :3] / clip[:, 3:4]
+
+    near, far = unproject(-1.0), unproject(1.0)
+    forward = camera.forward
+    near_depth = (near - camera.position) @ forward
+    far_depth = (far - camera.position) @ forward
+    along = (depth[covered] - near_depth) / np.where(np.abs(far_depth - near_depth) > 1e-30,
+                                                     far_depth - near_depth, 1.0)
+    points = near + (far - near) * along[:, None]
+    return points[np.all(np.isfinite(points), axis=1)]

@@ -145,7 +145,7 @@ def _owners_from_trace(kept, where, casters, n_pixels):
     regions the trace stage built (``TracedTerms.shadow_owners``); None without them."""
     if kept is None:
         return None
-    flat, traced_casters, regions = kept
+    flat, layer_index, traced_casters, regions = kept
     row_of = {caster: row for row, caster in enumerate(traced_casters)}
     if any(caster not in row_of for caster in casters):
         return None
@@ -153,8 +153,10 @@ def _owners_from_trace(kept, where, casters, n_pixels):
     position[flat] = np.arange(len(flat))
     at = position[where]
     found = at >= 0
+    in_layer = layer_index[at[found]]
     owners = np.zeros((len(casters), len(where)), bool)
-    owners[:, found] = regions[[row_of[caster] for caster in casters]][:, at[found]]
+    for row, caster in enumerate(casters):
+        owners[row, found] = regions[row_of[caster]][in_layer]
     return owners
 
 

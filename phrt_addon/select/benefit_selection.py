@@ -71,7 +71,7 @@ TIER_RATES = (1.0, 0.5, 0.25)
 TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
 TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
 KEEP_SMOOTHING = 0.1
-KEEP_RANGE = (0.05, 1.0)
+KEEP_RANGE = (0.25, 1.0)  # a share learned near 0 would never be tried again
 MARGIN_FRAMES = 20
 MARGIN_QUANTILE = 80
 MARGIN_MIN_SAMPLES = 5
@@ -169,17 +169,21 @@ class BenefitSelector:
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
         value = np.where(eligible, np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
         cost = np.clip(np.nan_to_num(np.asarray(cost_ms, np.float64), nan=np.inf, posinf=np.inf), 0.0, np.inf)
-        if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
-            for j in np.flatnonzero(np.asarray(unmeasured, bool) & eligible.any(axis=0)):
-                ratio = np.where(eligible[:, j], value[:, j] / np.maximum(cost[:, j], 1e-12), -1.0)
-                probe = np.zeros(len(eligible), bool)
-                probe[int(np.argmax(ratio))] = True
-                eligible = eligible.copy()
-                eligible[:, j] &= probe
         self.frames += 1
         available = max(float(time_left_ms) - float(overhead_ms), 0.0)
         margin = self.margin_ms(available)
         capacity = max(available - margin, 0.0)
+        fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
+            np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
+        if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
+            for j in np.flatnonzero(np.asarray(unmeasured, bool) & eligible.any(axis=0)):
+                fits = eligible[:, j] & (cost[:, j] + fixed[j] <= capacity)
+                ratio = np.where(fits, value[:, j] / np.maximum(cost[:, j], 1e-12), -1.0)
+                probe = np.zeros(len(eligible), bool)
+                if fits.any():
+                    probe[int(np.argmax(ratio))] = True
+                eligible = eligible.copy()
+                eligible[:, j] &= probe
 
         was = np.zeros_like(eligible)
         for i, name in enumerate(names):
@@ -193,15 +197,12 @@ class BenefitSelector:
         if np.any(explore):
             total = float(switched[eligible].sum()) + 1e-12
             bonus[explore] = total * np.minimum((waited[explore] + 1) / EXPLORE_FRAMES, 1.0)
-        fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
-            np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
         rate = np.zeros(eligible.shape)
         if tier_costs is None:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
         tier_costs = np.clip(np.nan_to_num(np.asarray(tier_costs, np.float64), nan=np.inf), 0.0, np.inf)
-        if tiers:  # the fixed parts of every effect with an item are paid up front
-            rate = self._choose_rates(names, eligible, value, bonus, was, tier_costs,
-                                      max(capacity - float(fixed[eligible.any(axis=0)].sum()), 0.0))
+        if tiers:
+            rate = self._choose_rates(names, eligible, value, bonus, was, tier_costs, capacity, fixed)
             chosen = rate > 0
         else:
             charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
@@ -222,10 +223,11 @@ class BenefitSelector:
         items measured at that rate right after a full-rate measurement, ``TIER_KEEP`` before."""
         return self.kept.get((effect, tier), TIER_KEEP[tier])
 
-    def _choose_rates(self, names, eligible, value, bonus, was, tier_costs, capacity) -> np.ndarray:
+    def _choose_rates(self, names, eligible, value, bonus, was, tier_costs, capacity, fixed) -> np.ndarray:
         """(n, 3) rate per item (0: not traced) by the multiple-choice knapsack over TIER_RATES:
-        an option's value is the item's value x its kept share, its cost ``tier_costs``; the
-        switching cost counts a change of rate like a change of state; shadows only at full rate."""
+        an option's value is the item's value x its kept share, its cost ``tier_costs``, each
+        effect's ``fixed`` part paid once if any of its items is traced; the switching cost counts
+        a change of rate like a change of state; shadows only at full rate."""
         items = np.argwhere(eligible)
         n_options = len(TIER_RATES)
         values = np.zeros((len(items), n_options))
@@ -239,7 +241,7 @@ class BenefitSelector:
                 factor = (1.0 + SWITCH) if same else (1.0 if was[i, j] else 1.0 - SWITCH)
                 values[row, option] = value[i, j] * self.keep(EFFECTS[j], tier) * factor + bonus[i, j]
                 costs[row, option] = tier_costs[i, j, option] * (1.0 if same else 1.0 + ADD_SLACK)
-        picked = knapsack.solve_choices(values, costs, capacity)
+        picked = knapsack.solve_choices(values, costs, capacity, groups=items[:, 1], group_costs=fixed)
         rate = np.zeros(eligible.shape)
         for row, option in enumerate(picked.tolist()):
             if option >= 0:

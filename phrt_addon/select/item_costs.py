@@ -40,11 +40,15 @@ from .benefit_selection import TIER_COST, TIER_RATES
 from .cost_model import MS_PER_RAY_PRIOR, UNMEASURED_MARGIN
 
 WINDOW = 32
-SPREAD = 1.5
+SPREAD = 1.5  # max/min ray count of the window before the line is fitted
 # Per-ray ms over Embree's per-ray ms, before a spread of ray counts lets the slope be fitted:
 # atrium path1 (a training path), every caster's shadows, 36,000 rays: 0.56 us a ray against 0.19
 # inside Embree (a ratio, machine-independent to first order).
-EMBREE_FACTOR = 3.0          # max/min ray count of the window before an intercept is fitted
+EMBREE_FACTOR = 3.0
+# An effect with items that has not been traced for this many frames forgets what it learned (its
+# window and its items' ratios): a fixed or per-ray part learned too high would otherwise price it
+# out for the rest of the replay, never to be measured again; forgotten, it is probed afresh.
+STALE_FRAMES = 30
 RATIO_SMOOTHING = 0.3
 RATIO_RANGE = (1e-3, 1e3)
 MAX_MS = 1e12
@@ -54,7 +58,8 @@ class ItemCosts:
     """Learned per replay (keys are element names, so the order of elements may change)."""
 
     def __init__(self):
-        self.samples = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # (rays, ms, setup ms)
+        self.samples = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # (rays, ms, setup ms, Embree ms)
+        self.idle = np.zeros(len(EFFECTS), np.int64)  # frames each effect had items and was not traced
         self.ratio: dict[tuple[str, str], float] = {}
         self._fit = {effect: (0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN) for effect in EFFECTS}
         self._pooled = np.ones(len(EFFECTS))
@@ -67,6 +72,19 @@ class ItemCosts:
 
     def per_ray_ms(self) -> np.ndarray:
         return np.array([self._fit[effect][1] for effect in EFFECTS])
+
+    def tick(self, wanted, traced) -> None:
+        """After a frame: ``wanted`` / ``traced`` (3,) bool, the effects that had eligible items /
+        that were traced.  An effect idle for STALE_FRAMES frames forgets its costs."""
+        wanted, traced = np.asarray(wanted, bool), np.asarray(traced, bool)
+        self.idle = np.where(traced, 0, self.idle + (wanted & ~traced))
+        for j in np.flatnonzero(self.idle >= STALE_FRAMES):
+            effect = EFFECTS[j]
+            self.samples[effect].clear()
+            self._fit[effect] = (0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN)
+            self.ratio = {key: value for key, value in self.ratio.items() if key[1] != effect}
+            self._pooled[j] = 1.0
+            self.idle[j] = 0
 
     def unmeasured(self) -> np.ndarray:
         """(3,) bool: the effects never measured in this replay."""
@@ -140,18 +158,21 @@ class ItemCosts:
 
 
 def _fit(samples, timed_setup: bool) -> tuple[float, float]:
-    """(fixed ms, ms per ray) from a window of (rays, ms, setup ms, Embree ms)."""
+    """(fixed ms, ms per ray) from a window of (rays, ms, setup ms, Embree ms).  The timed setup
+    (shadows) is taken out before the line is fitted and added back to its intercept, so a setup
+    that grows with the casters is not counted in both parts."""
     data = np.asarray(samples, np.float64)
     rays, ms, setup, inside = data.T
+    setup = setup if timed_setup else np.zeros_like(setup)
+    rest = np.maximum(ms - setup, 0.0)
     if len(data) >= 4 and rays.max() >= SPREAD * rays.min():
         i, j = np.triu_indices(len(data), 1)
         apart = rays[j] != rays[i]
-        per_ray = float(np.median((ms[j] - ms[i])[apart] / (rays[j] - rays[i])[apart]))
+        per_ray = float(np.median((rest[j] - rest[i])[apart] / (rays[j] - rays[i])[apart]))
     else:
         per_ray = EMBREE_FACTOR * float(np.median(inside / rays))
     per_ray = max(per_ray, 0.0)
-    low = float(np.median(setup)) if timed_setup else 0.0
-    fixed = float(np.clip(np.median(ms - per_ray * rays), low, max(float(ms.min()), low)))
-    if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms per ray
-        per_ray = float(np.median(np.maximum(ms - fixed, 0.0) / rays))
-    return fixed, per_ray
+    intercept = float(np.clip(np.median(rest - per_ray * rays), 0.0, float(rest.min())))
+    if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
+        per_ray = float(np.median(np.maximum(rest - intercept, 0.0) / rays))
+    return float(np.median(setup)) + intercept, per_ray

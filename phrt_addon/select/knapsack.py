@@ -112,48 +112,83 @@ def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
     return chosen
 
 
-def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
+def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None, group_costs=None) -> np.ndarray:
     """Multiple-choice knapsack: per item (row) at most one option (column), the largest summed
     value within ``capacity``.  Returns the chosen option per item, -1 for none.  Costs rounded
     up to bins of T as in :func:`solve` (never over T); exact for the rounded costs; compared
-    with the best single (item, option) that fits."""
+    with the best single (item, option) that fits.  ``groups`` (int per item, into
+    ``group_costs``): a group's cost is paid once if any of its items is chosen, as in
+    :func:`solve_grouped` (an effect's fixed work)."""
     values = np.atleast_2d(_finite(values, nan=0.0).reshape(np.shape(values)))
     costs = np.atleast_2d(_finite(costs, nan=LARGE).reshape(np.shape(values)))
     n_items, n_options = values.shape
+    groups = np.zeros(n_items, np.int64) if groups is None else np.asarray(groups, np.int64).ravel()
+    group_costs = np.zeros(1) if group_costs is None else np.maximum(_finite(group_costs, nan=LARGE), 0.0)
+    if groups.shape != (n_items,) or (n_items and (groups.min() < 0 or groups.max() >= len(group_costs))):
+        raise ValueError("groups must give each item an index into group_costs")
     choice = np.full(n_items, -1, np.int64)
     capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=LARGE))
     if n_items == 0 or n_options == 0 or capacity < 0:
         return choice
-    free = np.where((costs <= 0) & (values > 0), values, -np.inf)
+    free = np.where((costs <= 0) & (values > 0) & (group_costs[groups] <= 0)[:, None], values, -np.inf)
     free_choice = np.where(np.isfinite(free.max(axis=1)), np.argmax(free, axis=1), -1).astype(np.int64)
     if capacity == 0:  # only free options: the most valuable of each item
         return free_choice
-    usable = (values > 0) & (costs <= capacity)
+    usable = (values > 0) & (costs + group_costs[groups][:, None] <= capacity)
     rows = np.flatnonzero(usable.any(axis=1))
     if len(rows) == 0:
         return choice
-    n_bins = bins_for(len(rows), bins)
+    used_groups = np.unique(groups[rows])
+    n_bins = bins_for(len(rows) + len(used_groups), bins)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # in bins of T (T may be subnormal)
         weights = np.nan_to_num(np.minimum(costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
+        group_weights = np.nan_to_num(np.minimum(group_costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
     weights = np.ceil(weights * (1.0 - 1e-9)).astype(np.int64)  # 0 only for a free option
+    group_weights = np.ceil(group_weights * (1.0 - 1e-9)).astype(np.int64).tolist()
     best = np.zeros(n_bins + 1)
     took = np.full((len(rows), n_bins + 1), -1, np.int8 if n_options < 127 else np.int64)
-    for position, row in enumerate(rows):
-        new = best.copy()
-        for option in np.flatnonzero(usable[row]).tolist():
-            weight = int(weights[row, option])
-            candidate = best[:n_bins + 1 - weight] + values[row, option]
-            segment = new[weight:]
-            better = candidate > segment
-            segment[better] = candidate[better]
-            took[position, weight:][better] = option
-        best = new
+    # One row update: the table with each option taken (row o + 1 of ``table``; -inf where it
+    # does not fit) against the table without (row 0), the best per bin and which option won.
+    # Per group the programme runs from the table with the group's cost paid ("opened"), and the
+    # group is used only where that ends better than without it.
+    table = np.empty((n_options + 1, n_bins + 1))
+    columns = np.arange(n_bins + 1)
+    labels = np.arange(-1, n_options, dtype=took.dtype)
+    row_weights = np.minimum(weights, n_bins + 1).tolist()
+    row_values = values.tolist()
+    row_groups = groups[rows]
+    trail = []
+    for group in used_groups.tolist():
+        fixed = group_weights[group]
+        if fixed > n_bins:
+            continue
+        members = np.flatnonzero(row_groups == group).tolist()
+        opened = np.full(n_bins + 1, -np.inf)
+        opened[fixed:] = best[:n_bins + 1 - fixed]
+        for position in members:
+            row = int(rows[position])
+            table[0] = opened
+            table[1:] = -np.inf
+            for option in np.flatnonzero(usable[row]).tolist():
+                weight = row_weights[row][option]
+                if weight <= n_bins:
+                    np.add(opened[:n_bins + 1 - weight], row_values[row][option], out=table[option + 1, weight:])
+            winner = table.argmax(axis=0)
+            opened = table[winner, columns]
+            took[position] = labels[winner]
+        use = opened > best
+        trail.append((members, use, fixed))
+        best = np.where(use, opened, best)
     remaining = n_bins
-    for position in range(len(rows) - 1, -1, -1):
-        option = int(took[position, remaining])
-        if option >= 0:
-            choice[rows[position]] = option
-            remaining -= int(weights[rows[position], option])
+    for members, use, fixed in reversed(trail):
+        if not use[remaining]:
+            continue
+        for position in reversed(members):
+            option = int(took[position, remaining])
+            if option >= 0:
+                choice[rows[position]] = option
+                remaining -= int(weights[rows[position], option])
+        remaining -= fixed
     flat = np.where(usable, values, -np.inf).ravel()
     single = int(np.argmax(flat))
     if flat[single] > float(sum(values[i, o] for i, o in enumerate(choice) if o >= 0)):
@@ -167,7 +202,7 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
     ``group_costs``) and a group's cost is paid once if any of its items is chosen (an effect's
     fixed work: the shadow regions of the frame's pixels).  One dynamic programme whose state per
     group is open (its cost paid) or not: exact for the rounded costs up to ``EXACT_LIMIT`` items;
-    beyond it every group with a useful item is paid for up front and :func:`solve` fills the rest.
+    beyond it :func:`solve` (its core) for each subset of up to ``SUBSET_GROUPS`` groups paid for.
     Compared with the best single item that fits with its group's cost."""
     values = _finite(values, nan=0.0)
     costs = np.maximum(_finite(costs, nan=LARGE), 0.0)
@@ -186,9 +221,7 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
     if len(useful) == 0:
         return chosen
     if len(useful) > EXACT_LIMIT or capacity <= 0:
-        paid = float(group_costs[np.unique(groups[useful])].sum())
-        chosen[useful] = solve(values[useful], costs[useful], capacity - paid, bins)
-        return chosen
+        return _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins)
     n_bins = bins_for(len(useful) + len(group_costs), bins)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         def in_bins(ms):
@@ -229,5 +262,31 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
     single = useful[np.argmax(values[useful])]
     if values[single] > float(np.sum(values[chosen])):
         chosen[:] = False
+        chosen[single] = True
+    return chosen
+
+
+SUBSET_GROUPS = 4
+
+
+def _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins) -> np.ndarray:
+    """Beyond EXACT_LIMIT items: :func:`solve` over each subset of the groups paid for (all of
+    them paid when there are more than SUBSET_GROUPS), the best-valued; then the single-item guard."""
+    present = np.unique(groups[useful]).tolist()
+    subsets = ([present] if len(present) > SUBSET_GROUPS else
+               [[g for bit, g in enumerate(present) if mask >> bit & 1] for mask in range(1, 2 ** len(present))])
+    chosen, best = np.zeros(len(values), dtype=bool), 0.0
+    for subset in subsets:
+        left = capacity - float(group_costs[subset].sum())
+        members = useful[np.isin(groups[useful], subset)]
+        if left <= 0 or len(members) == 0:
+            continue
+        picked = np.zeros(len(values), dtype=bool)
+        picked[members] = solve(values[members], costs[members], left, bins)
+        if float(values[picked].sum()) > best:
+            chosen, best = picked, float(values[picked].sum())
+    single = useful[np.argmax(values[useful])]
+    if values[single] > best:
+        chosen = np.zeros(len(values), dtype=bool)
         chosen[single] = True
     return chosen

@@ -44,7 +44,8 @@ MAX_CLUSTERS = 8
 MISS = -1
 
 
-def worker_count() -> int: return max(1, min(os.cpu_count() or 1, 8))  # noqa: E704
+def worker_count() -> int:
+    return max(1, min(os.cpu_count() or 1, 8))
 
 
 def ray_epsilon(points: np.ndarray, scene_extent, view_distance=None) -> np.ndarray:
@@ -171,7 +172,6 @@ class TraceScene:
     def sets(self):
         return self._static + self._dynamic
 
-    # -- geometry -----------------------------------------------------------
     def _entry(self, mesh, cluster_origin):
         world = transform_points(mesh.matrix_world, mesh.positions) - cluster_origin
         normals = np.asarray(mesh.corner_normals, dtype=np.float64) @ normal_matrix(mesh.matrix_world).T

@@ -195,9 +195,9 @@ class TraceStage:
             traced ``values`` at ``idx[cast]``, the others reconstructed."""
             flat = pixels.flat[idx]
             if not np.all(cast):
-                begin = time.perf_counter()
-                if layer_name not in guides:
+                if layer_name not in guides:  # once a layer and frame: not a per-pixel cost
                     guides[layer_name] = layer_guide(pixels.layer)
+                begin = time.perf_counter()
                 out = reconstruct(flat, flat[cast], values, guides[layer_name], width, pixel_rate)
                 counters.reconstruct_ms[effect] = counters.reconstruct_ms.get(effect, 0.0) + _ms(begin)
                 counters.reconstructed_px[effect] = counters.reconstructed_px.get(effect, 0) + int(np.count_nonzero(~cast))
@@ -258,8 +258,7 @@ class TraceStage:
                 traced.shadow_visibility[(layer_name, light_index)] = filled(
                     "shadows", layer_name, pixels, idx, cast, np.where(blocked, 0.0, 1.0).astype(np.float32),
                     pixel_rate)
-                traced.shadow_owners[(layer_name, light_index)] = (
-                    pixels.flat[idx], list(casters), np.stack([region[idx] for region in caster_regions]))
+                traced.shadow_owners[(layer_name, light_index)] = (pixels.flat[idx], idx, list(casters), caster_regions)
                 counters.shadow_rays += len(ray_idx)
                 # A ray in overlapping casters' regions is shared between them.
                 _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region

@@ -136,7 +136,7 @@ def test_passes_are_finite_and_the_candidate_pass_leaves_out_k_zero(mode):
 def test_front_points_from_view_depth_are_the_gbuffer_positions(step):
     """The shadow-footprint estimate reads no layer back: it rebuilds sampled world positions
     from the resolve's view depth."""
-    from phrt.phrt_addon.frame import front_points
+    from phrt.phrt_addon.raster.gbuffer import front_points
     snapshot = mirror_scene("HYBRID")
     gbuffer = ray_cast_gbuffer(snapshot)
     points = front_points(snapshot.camera, gbuffer.view_depth, step)

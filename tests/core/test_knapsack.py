@@ -151,3 +151,58 @@ def test_grouped_leaves_a_group_whose_fixed_cost_buys_less_than_another():
     assert chosen.tolist() == [False, False, True]
     # With 6 ms both shadow items fit behind their fixed part (6 > 4 + 1.2) and are worth more.
     assert knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 6.0).tolist() == [True, True, False]
+
+
+def grouped_choices_brute_force(values, costs, groups, group_costs, capacity):
+    best = 0.0
+    n, k = values.shape
+    for options in product(range(-1, k), repeat=n):
+        picked = [(i, o) for i, o in enumerate(options) if o >= 0]
+        used = {groups[i] for i, _ in picked}
+        spent = sum(costs[i, o] for i, o in picked) + sum(group_costs[g] for g in used)
+        if spent <= capacity:
+            best = max(best, sum(values[i, o] for i, o in picked))
+    return best
+
+
+grouped_choice_instances = st.integers(1, 5).flatmap(lambda n: st.tuples(
+    st.lists(st.lists(st.floats(0.0, 10.0), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.lists(st.lists(st.floats(0.0, 20.0), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.lists(st.integers(0, 2), min_size=n, max_size=n),
+    st.lists(st.floats(0.0, 15.0), min_size=3, max_size=3),
+    st.floats(0.0, 60.0)))
+
+
+@settings(max_examples=200, deadline=None)
+@given(grouped_choice_instances)
+def test_grouped_multiple_choice_never_over_capacity_and_optimal_within_the_rounding(instance):
+    values, costs, groups, group_costs, capacity = (np.array(instance[0]), np.array(instance[1]),
+                                                    np.array(instance[2]), np.array(instance[3]), instance[4])
+    choice = knapsack.solve_choices(values, costs, capacity, groups=groups, group_costs=group_costs)
+    picked = [(i, o) for i, o in enumerate(choice.tolist()) if o >= 0]
+    spent = sum(costs[i, o] for i, o in picked) + sum(group_costs[g] for g in {groups[i] for i, _ in picked})
+    assert spent <= capacity * (1 + 1e-8)
+    got = sum(values[i, o] for i, o in picked)
+    n_bins = knapsack.bins_for(len(values) + len(group_costs))
+    shrunk = grouped_choices_brute_force(values, costs, groups, group_costs,
+                                         capacity * (1.0 - (len(values) + len(group_costs)) / n_bins))
+    assert grouped_choices_brute_force(values, costs, groups, group_costs, capacity) + 1e-9 >= got >= shrunk - 1e-9
+
+
+def test_one_effects_fixed_part_does_not_block_the_others():
+    """A shadow group whose fixed part is the whole time left and a reflection at quarter rate
+    that fits: the reflection is bought (paying every effect's fixed part up front bought nothing)."""
+    values = np.array([[5.0, 0.0, 0.0], [4.0, 3.4, 2.6]])
+    costs = np.array([[1.0, np.inf, np.inf], [8.0, 6.0, 3.0]])
+    choice = knapsack.solve_choices(values, costs, 5.0, groups=[0, 1], group_costs=[5.0, 1.0])
+    assert choice.tolist() == [-1, 2]
+
+
+def test_beyond_the_exact_limit_groups_are_paid_only_when_they_buy_something():
+    rng = np.random.default_rng(3)
+    n = knapsack.EXACT_LIMIT + 200
+    values, costs = rng.uniform(0.1, 1.0, n), rng.uniform(0.1, 1.0, n)
+    groups = np.where(np.arange(n) < 10, 0, 1)  # group 0: ten items behind a fixed part of 80
+    chosen = knapsack.solve_grouped(values, costs, groups, np.array([80.0, 1.0]), 50.0)
+    assert chosen.any() and not chosen[:10].any()
+    assert costs[chosen].sum() + 1.0 <= 50.0 + 1e-9
