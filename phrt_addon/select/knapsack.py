@@ -270,23 +270,35 @@ SUBSET_GROUPS = 4
 
 
 def _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins) -> np.ndarray:
-    """Beyond EXACT_LIMIT items: :func:`solve` over each subset of the groups paid for (all of
-    them paid when there are more than SUBSET_GROUPS), the best-valued; then the single-item guard."""
+    """Beyond EXACT_LIMIT items: every group with a useful item paid for and :func:`solve` over
+    the rest, again without the groups it left unused (their cost returned to T); only when the
+    groups' costs together exceed T, each subset of the groups (up to SUBSET_GROUPS of them) in
+    turn.  The best-valued, then the single-item guard."""
     present = np.unique(groups[useful]).tolist()
-    subsets = ([present] if len(present) > SUBSET_GROUPS else
-               [[g for bit, g in enumerate(present) if mask >> bit & 1] for mask in range(1, 2 ** len(present))])
-    chosen, best = np.zeros(len(values), dtype=bool), 0.0
-    for subset in subsets:
-        left = capacity - float(group_costs[subset].sum())
-        members = useful[np.isin(groups[useful], subset)]
-        if left <= 0 or len(members) == 0:
-            continue
+
+    def solved(paid):
         picked = np.zeros(len(values), dtype=bool)
-        picked[members] = solve(values[members], costs[members], left, bins)
-        if float(values[picked].sum()) > best:
-            chosen, best = picked, float(values[picked].sum())
+        members = useful[np.isin(groups[useful], paid)]
+        left = capacity - float(group_costs[paid].sum())
+        if left > 0 and len(members):
+            picked[members] = solve(values[members], costs[members], left, bins)
+        return picked
+
+    candidates = []
+    if float(group_costs[present].sum()) <= capacity or len(present) > SUBSET_GROUPS:
+        paid = present
+        for _ in range(len(present)):
+            candidates.append(solved(paid))
+            used = [g for g in paid if np.any(candidates[-1] & (groups == g))]
+            if not used or used == paid:
+                break
+            paid = used
+    else:
+        candidates = [solved([g for bit, g in enumerate(present) if mask >> bit & 1])
+                      for mask in range(1, 2 ** len(present))]
+    chosen = max(candidates, key=lambda picked: float(values[picked].sum()))
     single = useful[np.argmax(values[useful])]
-    if values[single] > best:
+    if values[single] > float(values[chosen].sum()):
         chosen = np.zeros(len(values), dtype=bool)
         chosen[single] = True
     return chosen
