@@ -1,34 +1,29 @@
 """Running a plan's jobs on a Dask cluster (the progress line of a plan's run: ``runs/progress.py``).
 
 :class:`DaskExecutor` has the interface of ``plan.LocalExecutor``
-(``run(plan_path, plan, execute, on_outcome)``): each job of the plan is one
-Dask task, ``run_job(execute, plan_path, job_id, *outcomes of its depends_on)``,
-submitted with the resource annotation ``phrt=1`` and ``retries=2``.  Workers
-are processes with the resource ``phrt=1`` (a LocalCluster of ``--workers N``
-here, or ``dask worker ... --resources phrt=1`` on render nodes), so a worker
-times one replay at a time.  A task that raises is retried, on any worker; a
-task whose worker dies is run again by the scheduler; a job's directory is
-only ever published complete (``plan.publish``) and a retry clears what a dead
-attempt left, so a half-written run is never taken for a result.  A job whose
-input is bad (a missing file or camera path) returns a failed outcome at once
-instead of raising: retrying cannot help it.
+(``run(plan_path, plan, execute, on_outcome)``): each job of the plan is one Dask task,
+``run_job(execute, plan_path, job_id, *outcomes of its depends_on)``, submitted with the
+resource annotation ``phrt=1`` and ``retries=2``.  Workers are processes with the resource
+``phrt=1`` (a LocalCluster of ``--workers N`` here, or ``dask worker ... --resources phrt=1`` on
+render nodes), so a worker times one replay at a time.  A task that raises is retried, on any
+worker; a task whose worker dies is run again by the scheduler; a job's directory is only ever
+published complete (``plan.publish``) and a retry clears what a dead attempt left, so a
+half-written run is never taken for a result.  A job whose input is bad (a missing file or
+camera path) returns a failed outcome at once instead of raising: retrying cannot help it.
 
-Workers open the plan's files themselves: ``plan.json``, the sweep folder and
-every ``.blend`` it names must be on storage all workers see at the same path
-(a sample scene name resolves on the worker).  Before a plan runs, every
-worker is checked to see ``plan.json``.
+Workers open the plan's files themselves: ``plan.json``, the sweep folder and every ``.blend`` it
+names must be on storage all workers see at the same path (a sample scene name resolves on the
+worker).  Before a plan runs, every worker is checked to see ``plan.json``.
 
-Blender as a Python module has a main thread: the thread that imported
-``bpy``.  Files must be opened there (opening one from another thread leaves
-Blender to crash when the process ends); rendering may happen in any thread.
-A Dask worker runs tasks in a thread of its own and its event loop in the
-process's main thread, so a worker plugin given to :class:`DaskExecutor`
-(``cli/dask_worker.py``) imports ``bpy`` and registers PHRT on the event
-loop when the worker starts, and :func:`on_main_thread` runs the file loading
-of a job there.
+Blender as a Python module has a main thread: the thread that imported ``bpy``.  Files must be
+opened there (opening one from another thread leaves Blender to crash when the process ends);
+rendering may happen in any thread.  A Dask worker runs tasks in a thread of its own and its
+event loop in the process's main thread, so a worker plugin given to :class:`DaskExecutor`
+(``cli/dask_worker.py``) imports ``bpy`` and registers PHRT on the event loop when the worker
+starts, and :func:`on_main_thread` runs the file loading of a job there.
 
-Dask is an optional dependency: nothing here imports it until a
-:class:`DaskExecutor` starts.  Plain Python, no ``bpy``.
+Dask is an optional dependency: nothing here imports it until a :class:`DaskExecutor` starts.
+Plain Python, no ``bpy``.
 """
 from __future__ import annotations
 
@@ -38,6 +33,7 @@ import os
 import re
 import socket
 import threading
+import time
 import uuid
 import warnings
 from dataclasses import replace
@@ -50,6 +46,7 @@ RETRIES = 2
 CONNECT_TIMEOUT_S = 10
 DEFAULT_DASHBOARD = "127.0.0.1:8787"  # this machine only: the dashboard shows task names, paths and logs
 LOCAL_HOST = "127.0.0.1"  # a LocalCluster's scheduler and workers listen here only
+CLOSE_TIMEOUT_S = 10.0  # how long closing waits for a LocalCluster's workers to leave first
 PIP_DASK = "dask[distributed,diagnostics]==2026.8.0"
 _ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
 
@@ -186,10 +183,9 @@ def describe_error(error: BaseException) -> str:
 
 
 class _WorkerExits(logging.Filter):
-    """Hands the nanny's lines about worker processes that did not exit cleanly (logged at INFO,
-    which LocalCluster silences) to every listening executor, and lets through only warnings and
-    errors.  One per process, on the ``distributed.nanny`` logger (a logger stops at its first
-    filter that drops a record, so a filter per executor would hide lines from the others)."""
+    """Hands the nanny's lines about worker processes that did not exit cleanly (INFO, which
+    LocalCluster silences) to every listening executor; lets through warnings and errors.  One per
+    process on ``distributed.nanny`` (one per executor would hide lines from the others)."""
 
     PATTERN = re.compile(r"Worker process (\d+) (was killed by .*|exited with status \d+)")
 
@@ -243,12 +239,10 @@ class DaskExecutor:
         self.dashboard_address = dashboard_address
         self.security = security  # distributed.security.Security of a TLS cluster, or None
         self.connect_timeout_s = connect_timeout_s
-        self.cluster = None
-        self.client = None
+        self.cluster = self.client = None
         self._exits = []  # (pid, what happened) of this LocalCluster's workers that did not exit cleanly
 
     # -- the cluster -------------------------------------------------------------------------
-
     def start(self) -> "DaskExecutor":
         distributed = import_distributed()
         try:
@@ -311,6 +305,15 @@ class DaskExecutor:
         return list(self._exits)
 
     def close(self):
+        if self.cluster is not None and self.client is not None:
+            # Workers first: one whose heartbeat finds the scheduler closed logs an ERROR (loaded machine).
+            try:
+                self.cluster.scale(0)
+                deadline = time.monotonic() + CLOSE_TIMEOUT_S
+                while self.client.scheduler_info(n_workers=-1)["workers"] and time.monotonic() < deadline:
+                    time.sleep(0.05)
+            except Exception:  # closing anyway below
+                pass
         if self.client is not None:
             self.client.close()
             self.client = None

@@ -280,7 +280,7 @@ def _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bi
         picked = np.zeros(len(values), dtype=bool)
         members = useful[np.isin(groups[useful], paid)]
         left = capacity - float(group_costs[paid].sum())
-        if left > 0 and len(members):
+        if left >= 0 and len(members):  # at 0 the free items (solve takes them)
             picked[members] = solve(values[members], costs[members], left, bins)
         return picked
 

@@ -206,3 +206,9 @@ def test_beyond_the_exact_limit_groups_are_paid_only_when_they_buy_something():
     chosen = knapsack.solve_grouped(values, costs, groups, np.array([80.0, 1.0]), 50.0)
     assert chosen.any() and not chosen[:10].any()
     assert costs[chosen].sum() + 1.0 <= 50.0 + 1e-9
+
+
+def test_grouped_takes_free_items_with_no_time_left_beyond_the_exact_limit():
+    """T = 0: items of cost 0 in a group of cost 0 are free (hypothesis found the fallback missing them)."""
+    assert knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [0.0, 0.0, 0.0], 0.0).tolist() == [True, True]
+    assert knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [1.0, 0.0, 0.0], 0.0).tolist() == [False, False]
