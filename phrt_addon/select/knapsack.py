@@ -230,6 +230,7 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
         weights, group_weights = in_bins(costs[useful]), in_bins(group_costs)
     best = np.zeros(n_bins + 1)
     trail = []  # per group with useful items: (group, its items, took, opened-at mask)
+    weight_of, value_of = weights.tolist(), values[useful].tolist()
     for group in np.unique(groups[useful]).tolist():
         members = np.flatnonzero(groups[useful] == group)
         fixed = int(group_weights[group])
@@ -239,13 +240,13 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
         opened[fixed:] = best[:n_bins + 1 - fixed]
         took = np.zeros((len(members), n_bins + 1), dtype=bool)
         for position, member in enumerate(members.tolist()):
-            weight = int(weights[member])
+            weight = weight_of[member]
             if weight > n_bins - fixed:
                 continue
-            candidate = opened[:n_bins + 1 - weight] + values[useful[member]]
-            better = candidate > opened[weight:]
-            took[position, weight:] = better
-            opened[weight:] = np.where(better, candidate, opened[weight:])
+            candidate = opened[:n_bins + 1 - weight] + value_of[member]
+            segment = opened[weight:]
+            better = np.greater(candidate, segment, out=took[position, weight:])
+            np.copyto(segment, candidate, where=better)
         # Opening the group pays only if it buys something: an empty open group is never better.
         use = opened > best
         trail.append((members, took, use, fixed))
