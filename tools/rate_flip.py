@@ -15,7 +15,6 @@ each path: every effect at full, half and quarter rate, and the rate pass).
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 from pathlib import Path
 
@@ -140,13 +139,8 @@ def main(argv=None) -> int:
                 continue
             scene = str(Path(args.showcase).resolve())
         rows += measure_path(scene, path, frames, args.every, resolution, out, target.replace("/", "-"))
-    with open(out / "rate_flip.csv", "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
-    text = markdown(rows)
-    (out / "rate_flip.md").write_text(text, encoding="utf-8")
-    print(text)
+    from selection_eval import write_table  # its sibling in tools/
+    write_table(out, "rate_flip", COLUMNS, rows, markdown(rows))
     return 0
 
 

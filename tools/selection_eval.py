@@ -144,16 +144,19 @@ def main(argv=None) -> int:
                         help="only (re)write the table from the sweeps already in --out")
     args = parser.parse_args(argv)
     table = evaluate(args)
-    out = Path(args.out)
-    with open(out / "selection_eval.csv", "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(table)
-    text = markdown(table)
-    (out / "selection_eval.md").write_text(text, encoding="utf-8")
-    print(text)
-    print(f"wrote {out / 'selection_eval.csv'} and {out / 'selection_eval.md'}")
+    write_table(Path(args.out), "selection_eval", COLUMNS, table, markdown(table))
     return 0
+
+
+def write_table(out: Path, stem: str, columns, rows, text: str) -> None:
+    """``OUT/<stem>.csv`` (``columns``, one row per dict) and ``OUT/<stem>.md`` (``text``), printed."""
+    with open(out / f"{stem}.csv", "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+    (out / f"{stem}.md").write_text(text, encoding="utf-8")
+    print(text)
+    print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.md')}")
 
 
 if __name__ == "__main__":

@@ -109,13 +109,8 @@ def test_multiple_choice_takes_a_cheaper_rate_when_full_does_not_fit():
 
 
 def grouped_brute_force(values, costs, groups, group_costs, capacity):
-    best = 0.0
-    for bits in product((False, True), repeat=len(values)):
-        mask = np.array(bits, bool)
-        spent = costs[mask].sum() + group_costs[np.unique(groups[mask])].sum()
-        if spent <= capacity and values[mask].sum() > best:
-            best = values[mask].sum()
-    return best
+    """The 0/1 case: one option per item."""
+    return grouped_choices_brute_force(values[:, None], costs[:, None], groups, group_costs, capacity)
 
 
 grouped_instances = st.integers(1, 8).flatmap(lambda n: st.tuples(
