@@ -150,7 +150,8 @@ class ReplayRun:
         except run_folder.FolderError as error:
             raise ReplayError(str(error)) from None
         self._work = work.work_record(bpy.data.filepath or None, (start, end), (width, height), mode=mode,
-                                      images=images, budget_ms=requested_budget_ms, budget_at=fraction,
+                                      images=images, budget_ms=requested_budget_ms,
+                                      budget_at=fraction if mode == "HYBRID" else None,
                                       overrides=overrides)
         self.scene, self.mode, self.images = scene, mode, images
         # A range is lazy: --frames 1-2000000000 holds no list of two billion frames.

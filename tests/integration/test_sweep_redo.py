@@ -48,12 +48,22 @@ def edit_blend(path: Path):
     bpy.ops.wm.read_homefile(use_empty=True)
 
 
+def set_budget_fraction(path: Path, fraction: float):
+    """Give the scene a Budget fraction of its own (the sample scenes have 0.4) and save it."""
+    bpy.ops.wm.open_mainfile(filepath=str(path), use_scripts=False)
+    bpy.context.scene.phrt.use_budget_at = True
+    bpy.context.scene.phrt.budget_at = fraction
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+
+
 @pytest.fixture(scope="module")
 def sweeps(tmp_path_factory):
     if not hasattr(bpy.types.Scene, "phrt"):
         phrt.register()
     folder = tmp_path_factory.mktemp("redo")
     blend = save_moving_showcase(folder / "showcase.blend", 64, 48)
+    set_budget_fraction(blend, 0.4)  # as the sample scenes: the raster and ray traced runs have none
     results = {"first": run_phrt(["sweep", str(blend), "--frames", "1-3", *SWEEP], folder),
                "other_frames": run_phrt(["sweep", str(blend), "--frames", "4-6", *SWEEP], folder),
                "unchanged": run_phrt(["sweep", str(blend), "--frames", "4-6", *SWEEP], folder)}
