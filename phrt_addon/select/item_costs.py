@@ -4,18 +4,20 @@ The paper's cost model (``cost_model.py``) predicts an element's ms as its rays 
 ray per effect.  Measured on the sample scenes, an effect's time is mostly a fixed part (atrium,
 320x240: shadows of one small caster, 1,000 rays, 4.5 ms; of every caster, 36,000 rays, 28 ms:
 about 3.8 ms of building each light's shadow regions over the frame's pixels, then 0.7 us a
-ray), so one cost per ray learned on a small item over-predicts a large one by 10x or more, and an
+ray), so one cost per ray learned on a small item over-predicts a large one by 3-10x, and an
 item predicted too dear is never traced, so never measured again.  Here, per effect:
 
-* ``per_ray`` ms: the slope of a robust line (Theil-Sen: the median of the pairwise slopes)
-  through the last ``WINDOW`` traced frames' (rays, ms), once their ray counts spread by
-  ``SPREAD``; before that ``EMBREE_FACTOR`` times the ms a ray spent inside Embree's queries
-  (``TraceCounters.*_embree_ms``: the numpy work around a ray costs about twice Embree's own; on
-  a small batch Embree's per-call overhead makes this an over- not an under-prediction); the
-  cost model's prior times ``UNMEASURED_MARGIN`` before the effect's first traced frame;
-* ``fixed`` ms, charged once a frame when any item of the effect is traced: the median of
-  (ms - per_ray x rays) over the window, at least (for shadows) the trace stage's own timer of
-  the lights' region building (``TraceCounters.shadow_setup_ms``);
+* an item's ms against its rays: a power law, scale x rays ** exponent (``MIN_EXPONENT``..1),
+  through the last ``WINDOW`` traced frames, each frame's rays and ms divided among its items,
+  over the pairs of frames whose rays an item are ``SPREAD`` apart (``MIN_PAIRS`` of them at
+  least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
+  against the rays).  Before such a spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
+  (the numpy work around a ray costs about twice Embree's own), the rest of the time an
+  intercept paid once; the cost model's prior times ``UNMEASURED_MARGIN`` before the effect's
+  first traced frame;
+* ``fixed`` ms, charged once a frame when any item of the effect is traced: the trace stage's own
+  timer of the lights' region building for shadows (``TraceCounters.shadow_setup_ms``, the median
+  of the window), plus the linear fit's intercept before the power law is fitted;
 * each item's rays: its expected rays (``area_px`` x the rays one of its pixels costs, from the
   shadow footprint for shadows) times a ratio learned from the rays the trace stage attributed to
   it (``TraceResult.item_rays``, an EMA); an item never traced takes the median ratio of the
@@ -45,6 +47,12 @@ SPREAD = 1.5  # max/min ray count of the window before the line is fitted
 # atrium path1 (a training path), every caster's shadows, 36,000 rays: 0.56 us a ray against 0.19
 # inside Embree (a ratio, machine-independent to first order).
 EMBREE_FACTOR = 3.0
+MIN_PAIRS = 3  # pairs of frames SPREAD apart in rays before the power law is fitted
+# An item's ms grow as its rays to this power at least (1: linear).  Measured, atrium path1 at
+# 320x240, shadows beyond the lights' setup, one caster alone: 180 rays 1.0 ms, 840 rays 2.5 ms,
+# 22,000 rays 18 ms (the oracle's timing): about rays ** 0.6 (numpy's and Embree's per-call work
+# weighs on a small item, not on a large one).
+MIN_EXPONENT = 0.6
 # An effect with items that has not been traced for this many frames forgets what it learned (its
 # window and its items' ratios): a fixed or per-ray part learned too high would otherwise price it
 # out for the rest of the replay, never to be measured again; forgotten, it is probed afresh.
@@ -61,7 +69,7 @@ class ItemCosts:
         self.samples = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # (rays, ms, setup ms, Embree ms)
         self.idle = np.zeros(len(EFFECTS), np.int64)  # frames each effect had items and was not traced
         self.ratio: dict[tuple[str, str], float] = {}
-        self._fit = {effect: (0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN) for effect in EFFECTS}
+        self._fit = {effect: _prior(effect) for effect in EFFECTS}
         self._pooled = np.ones(len(EFFECTS))
         self.reconstruction = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # ms per pixel
 
@@ -71,7 +79,17 @@ class ItemCosts:
         return np.array([self._fit[effect][0] for effect in EFFECTS])
 
     def per_ray_ms(self) -> np.ndarray:
+        """(3,) ms a ray of the linear part (the power law's scale where it is fitted)."""
         return np.array([self._fit[effect][1] for effect in EFFECTS])
+
+    def rays_ms(self, rays) -> np.ndarray:
+        """(n, 3) ms of items casting ``rays`` (n, 3), their effects' fixed parts not included."""
+        rays = np.maximum(np.nan_to_num(np.asarray(rays, np.float64), nan=0.0, posinf=MAX_MS), 0.0)
+        out = np.empty_like(rays)
+        for j, effect in enumerate(EFFECTS):
+            _, scale, exponent, embree = self._fit[effect]
+            out[:, j] = np.maximum(scale * rays[:, j] ** exponent, embree * rays[:, j])
+        return out
 
     def tick(self, wanted, traced) -> None:
         """After a frame: ``wanted`` / ``traced`` (3,) bool, the effects that had eligible items /
@@ -81,7 +99,7 @@ class ItemCosts:
         for j in np.flatnonzero(self.idle >= STALE_FRAMES):
             effect = EFFECTS[j]
             self.samples[effect].clear()
-            self._fit[effect] = (0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN)
+            self._fit[effect] = _prior(effect)
             self.ratio = {key: value for key, value in self.ratio.items() if key[1] != effect}
             self._pooled[j] = 1.0
             self.idle[j] = 0
@@ -108,7 +126,7 @@ class ItemCosts:
     def predict(self, names, expected_rays, rt_cost) -> np.ndarray:
         """(n, 3) ms of each item at full rate, its effect's fixed part not included."""
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
-        ms = rays * self.per_ray_ms()[None, :] * np.asarray(rt_cost, np.float64).reshape(-1, 1)
+        ms = self.rays_ms(rays) * np.asarray(rt_cost, np.float64).reshape(-1, 1)
         return np.clip(np.nan_to_num(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
     def tier_costs(self, names, expected_rays, pixels, rt_cost) -> np.ndarray:
@@ -117,13 +135,15 @@ class ItemCosts:
         out = np.empty(full.shape + (len(TIER_RATES),))
         pixels = np.nan_to_num(np.asarray(pixels, np.float64), nan=0.0, posinf=0.0)
         q = np.asarray(rt_cost, np.float64).reshape(-1, 1)
+        rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
         for j, effect in enumerate(EFFECTS):
             per_pixel = float(np.median(self.reconstruction[effect])) if self.reconstruction[effect] else None
             for option, rate in enumerate(TIER_RATES):
                 if per_pixel is None or rate >= 1.0:
                     out[:, j, option] = full[:, j] * TIER_COST[rate]
                 else:
-                    out[:, j, option] = full[:, j] * rate + per_pixel * pixels[:, j] * (1.0 - rate) * q[:, 0]
+                    out[:, j, option] = (self.rays_ms(rays * rate)[:, j] + per_pixel * pixels[:, j] * (1.0 - rate)) \
+                        * q[:, 0]
         return np.clip(np.nan_to_num(out, nan=MAX_MS, posinf=MAX_MS), 0.0, MAX_MS)
 
     # -- learning ------------------------------------------------------------------------------
@@ -150,29 +170,53 @@ class ItemCosts:
                 continue
             setup = float(shadow_setup_ms) if effect == "shadows" and np.isfinite(shadow_setup_ms) else 0.0
             inside = float(embree_ms[j]) if np.isfinite(embree_ms[j]) else 0.0
-            self.samples[effect].append((rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms)))
+            self.samples[effect].append((rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
+                                         float(np.count_nonzero(chosen[:, j]))))
             self._fit[effect] = _fit(self.samples[effect], effect == "shadows")
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
                 self._pooled[j] = float(np.median(measured))
 
 
-def _fit(samples, timed_setup: bool) -> tuple[float, float]:
-    """(fixed ms, ms per ray) from a window of (rays, ms, setup ms, Embree ms).  The timed setup
-    (shadows) is taken out before the line is fitted and added back to its intercept, so a setup
-    that grows with the casters is not counted in both parts."""
+def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float]:
+    """(fixed ms, scale, exponent, Embree's ms a ray) from a window of (rays, ms, setup ms, Embree
+    ms, items): an item of r rays costs max(scale x r ** exponent, Embree's ms a ray x r).  The
+    timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
+    casters is not counted twice)."""
     data = np.asarray(samples, np.float64)
-    rays, ms, setup, inside = data.T
+    rays, ms, setup, inside, items = data.T
     setup = setup if timed_setup else np.zeros_like(setup)
     rest = np.maximum(ms - setup, 0.0)
-    if len(data) >= 4 and rays.max() >= SPREAD * rays.min():
-        i, j = np.triu_indices(len(data), 1)
-        apart = rays[j] != rays[i]
-        per_ray = float(np.median((rest[j] - rest[i])[apart] / (rays[j] - rays[i])[apart]))
-    else:
-        per_ray = EMBREE_FACTOR * float(np.median(inside / rays))
-    per_ray = max(per_ray, 0.0)
+    items = np.maximum(items, 1.0)
+    i, j = np.triu_indices(len(data), 1)
+    # Embree's own ms a ray: the slope of its time against the rays over pairs of frames SPREAD
+    # apart (its per-call overhead is no ray's: 160 rays of one small caster took 0.8 us a ray
+    # inside Embree, 1,000 rays 0.4, a 36,000-ray batch 0.19), else on the window's largest batch.
+    apart = np.maximum(rays[i], rays[j]) >= SPREAD * np.minimum(rays[i], rays[j])
+    largest = int(np.argmax(rays))
+    embree = float(inside[largest] / rays[largest])
+    if np.any(apart):
+        slope = float(np.median((inside[j] - inside[i])[apart] / (rays[j] - rays[i])[apart]))
+        embree = float(np.clip(slope, 0.0, embree)) if slope > 0 else embree
+    # An item's time against its rays, per item of each frame (a frame of two casters is two
+    # items of half its rays each): a power law through the pairs of frames SPREAD apart.
+    x, y = rays / items, rest / items
+    usable = (x > 0) & (y > 0)
+    apart = (np.maximum(x[i], x[j]) >= SPREAD * np.minimum(x[i], x[j])) & usable[i] & usable[j]
+    if np.count_nonzero(apart) >= MIN_PAIRS:
+        exponent = float(np.clip(np.median(np.log(y[j] / y[i])[apart] / np.log(x[j] / x[i])[apart]),
+                                 MIN_EXPONENT, 1.0))
+        scale = float(np.median(y[usable] / x[usable] ** exponent))
+        return float(np.median(setup)), scale, exponent, embree
+    # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
+    # fixed part paid once (its intercept).
+    per_ray = EMBREE_FACTOR * embree
     intercept = float(np.clip(np.median(rest - per_ray * rays), 0.0, float(rest.min())))
     if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
         per_ray = float(np.median(np.maximum(rest - intercept, 0.0) / rays))
-    return float(np.median(setup)) + intercept, per_ray
+    return float(np.median(setup)) + intercept, per_ray, 1.0, embree
+
+
+def _prior(effect) -> tuple[float, float, float, float]:
+    """Before an effect's first traced frame: the cost model's prior ms a ray, margined."""
+    return 0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN, 1.0, 0.0

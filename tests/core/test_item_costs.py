@@ -35,12 +35,43 @@ def test_a_small_casters_frames_do_not_price_a_large_caster_by_their_fixed_part(
     assert large < 0.2 * 36 * 4.6
 
 
-def test_a_spread_of_ray_counts_fits_the_line():
+def power_frame(costs, casters, scale=0.05, exponent=0.6, setup=3.0, embree=2e-4):
+    """One traced frame of shadow items, each ``scale x rays ** exponent`` ms beyond the setup."""
+    names = [f"C{i}" for i in range(len(casters))]
+    rays = np.array(casters, float)
+    expected = np.zeros((len(rays), 3))
+    expected[:, 0] = rays
+    chosen = np.zeros((len(rays), 3), bool)
+    chosen[:, 0] = True
+    ms = setup + float(np.sum(scale * rays ** exponent))
+    costs.observe(names, expected, expected, chosen, chosen.astype(float), [ms, 0, 0], [rays.sum(), 0, 0],
+                  shadow_setup_ms=setup, embree_ms=[embree * rays.sum(), 0, 0])
+    return names, expected
+
+
+def test_a_spread_of_ray_counts_fits_the_power_law():
+    """One caster alone at 180 and 840 rays, two at 500 each: an item's ms are fitted as a power of
+    its rays (the measured shape: a large caster costs far less a ray than a small one), so a
+    22,000-ray caster is priced near the truth rather than by the small ones' ms a ray."""
     costs = ItemCosts()
-    for rays_large in (0, 36000, 0, 36000, 0, 18000):
-        shadows_frame(costs, 1000, rays_large, chosen_large=rays_large > 0)
-    assert costs.per_ray_ms()[0] == pytest.approx(6e-4, rel=1e-6)  # Theil-Sen through exact points
-    assert costs.fixed_ms()[0] == pytest.approx(4.0, rel=1e-6)
+    for casters in ([180], [840], [500, 500], [180], [840], [2000]):
+        power_frame(costs, casters)
+    fixed, scale, exponent, _ = costs._fit["shadows"]
+    assert exponent == pytest.approx(0.6, rel=1e-6) and scale == pytest.approx(0.05, rel=1e-6)
+    assert fixed == pytest.approx(3.0)
+    names, expected = ["Oak"], np.array([[22000.0, 0, 0]])
+    assert costs.predict(names, expected, [1.0])[0, 0] == pytest.approx(0.05 * 22000 ** 0.6, rel=1e-6)
+    # The small casters' ms a ray (0.05 x 180 ** -0.4 = 6.3 us) would have said 140 ms.
+    assert costs.predict(names, expected, [1.0])[0, 0] < 0.25 * 22000 * 0.05 * 180 ** -0.4
+
+
+def test_an_item_never_costs_less_than_its_rays_inside_embree():
+    costs = ItemCosts()
+    for casters in ([180], [840], [180], [840]):
+        power_frame(costs, casters, exponent=0.3, embree=1e-3)
+    _, _, exponent, embree = costs._fit["shadows"]
+    assert exponent == pytest.approx(item_costs.MIN_EXPONENT) and embree == pytest.approx(1e-3)
+    assert costs.predict(["Oak"], np.array([[1e6, 0, 0]]), [1.0])[0, 0] == pytest.approx(1e6 * 1e-3)
 
 
 def test_rays_ratio_is_learned_per_item_and_q_scales_the_cost():
@@ -66,8 +97,8 @@ def test_bad_numbers_are_not_learned():
 
 
 def test_a_reduced_rate_costs_its_share_of_the_rays_plus_its_reconstruction():
-    """Issue 23: the learned quarter-rate cost is about a quarter of the per-ray part plus the
-    reconstruction of the other three quarters; the fixed part is the same at every rate."""
+    """Issue 23: the learned quarter-rate cost is the per-ray part at a quarter of the rays plus the
+    reconstruction of the other three quarters; an effect's fixed part is the same at every rate."""
     costs = ItemCosts()
     names = ["Mirror"]
     expected = np.array([[0.0, 4000.0, 0.0]])
@@ -76,19 +107,20 @@ def test_a_reduced_rate_costs_its_share_of_the_rays_plus_its_reconstruction():
     prior = costs.tier_costs(names, expected, pixels, [1.0])
     full = costs.predict(names, expected, [1.0])[0, 1]
     assert prior[0, 1].tolist() == pytest.approx([full * item_costs.TIER_COST[r] for r in item_costs.TIER_RATES])
-    for rate, rays, ms, recon in ((1.0, 4000, 2.0 + 4000 * 5e-4, 0.0), (0.25, 1000, 2.0 + 1000 * 5e-4 + 1.5, 1.5),
-                                  (1.0, 4000, 2.0 + 4000 * 5e-4, 0.0), (0.5, 2000, 2.0 + 2000 * 5e-4 + 1.0, 1.0),
-                                  (0.25, 1000, 2.0 + 1000 * 5e-4 + 1.5, 1.5)):
+    ray_ms = (lambda rays: 0.02 * rays ** 0.8)
+    for rate, recon in ((1.0, 0.0), (0.25, 1.5), (1.0, 0.0), (0.5, 1.0), (0.25, 1.5)):
+        rays = 4000 * rate
         filled = int(2000 * (1 - rate))
         costs.observe(names, expected, np.array([[0, rays, 0]], float), np.array([[False, True, False]]),
-                      np.array([[0, rate, 0]]), [0, ms, 0], [0, rays, 0], embree_ms=[0, rays * 1e-4, 0],
+                      np.array([[0, rate, 0]]), [0, ray_ms(rays) + recon, 0], [0, rays, 0],
+                      embree_ms=[0, rays * 1e-4, 0],
                       reconstruct_ms={"reflections": recon} if recon else {},
                       reconstructed_px={"reflections": filled} if recon else {})
-    assert costs.per_ray_ms()[1] == pytest.approx(5e-4, rel=1e-6)
-    assert costs.fixed_ms()[1] == pytest.approx(2.0, rel=1e-6)
+    assert costs._fit["reflections"][2] == pytest.approx(0.8, rel=1e-6)
+    assert costs.fixed_ms()[1] == pytest.approx(0.0, abs=1e-9)
     tiers = costs.tier_costs(names, expected, pixels, [1.0])[0, 1]
     per_pixel = 1.5 / 1500  # the reconstruction's ms per pixel filled
     by_rate = dict(zip(item_costs.TIER_RATES, tiers))
-    assert by_rate[1.0] == pytest.approx(4000 * 5e-4)
-    assert by_rate[0.25] == pytest.approx(0.25 * 4000 * 5e-4 + per_pixel * 1500)
-    assert by_rate[0.5] == pytest.approx(0.5 * 4000 * 5e-4 + per_pixel * 1000)
+    assert by_rate[1.0] == pytest.approx(ray_ms(4000))
+    assert by_rate[0.25] == pytest.approx(ray_ms(1000) + per_pixel * 1500)
+    assert by_rate[0.5] == pytest.approx(ray_ms(2000) + per_pixel * 1000)
