@@ -4,7 +4,7 @@ For each judged path (arcade path3, atrium path2, atrium path3 and a path of the
 showcase scene; never the paths constants are fitted on: arcade path1-2, atrium
 path1) a ``phrt sweep`` at 320x240 over the given frames, budgets F = 0.1, 0.25,
 0.5, 0.75, 0.9 of the way from raster to ray traced time, the oracle every 4th
-frame, variants measured (the paper's), error and benefit (those the sweep knows).
+frame, variants measured (the paper's), error, benefit and tiers (those the sweep knows).
 Then one table, variant x budget x path: the captured share of the oracle's
 error reduction with its 90% interval, pops per 100 frames, p95 / budget, the
 share of frames within budget, printed and written to ``OUT/selection_eval.csv``
@@ -13,7 +13,7 @@ already complete is reused, so an interrupted evaluation resumes.
 
     python tools/selection_eval.py [--out out/selection-eval] [--frames 1-240]
         [--paths arcade/path3,atrium/path2,atrium/path3,showcase/orbit] [--budget-at 0.1,...]
-        [--variants measured,error,benefit] [--oracle-every 4] [--resolution 320x240]
+        [--variants measured,error,benefit,tiers] [--oracle-every 4] [--resolution 320x240]
 
 The showcase scene has no camera path of its own: this tool saves it with the
 camera orbiting the objects over the frames (``showcase.blend`` in OUT, path
@@ -29,7 +29,7 @@ from pathlib import Path
 
 DEFAULT_PATHS = "arcade/path3,atrium/path2,atrium/path3,showcase/orbit"
 DEFAULT_BUDGETS = "0.1,0.25,0.5,0.75,0.9"
-DEFAULT_VARIANTS = "measured,error,benefit"
+DEFAULT_VARIANTS = "measured,error,benefit,tiers"
 COLUMNS = ("path", "variant", "budget_at", "budget_ms", "captured", "captured_lo", "captured_hi", "judged_frames",
            "popping", "item_popping", "p95_over_budget", "raster_p95_over_budget", "within_budget", "flip", "mean_ms",
            "first_frame_ms")

@@ -11,7 +11,9 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   through the last ``WINDOW`` traced frames, each frame's rays and ms divided among its items,
   over the pairs of frames whose rays an item are ``SPREAD`` apart (``MIN_PAIRS`` of them at
   least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
-  against the rays).  Before such a spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
+  against the rays); beyond the largest item of the window, growing as rays ** ``MIN_EXPONENT``
+  (an optimistic price: a fit on small items extrapolated at its own exponent priced atrium's oak,
+  never traced, at 40 ms against the oracle's 22-32, so it was never tried).  Before such a spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
   (the numpy work around a ray costs about twice Embree's own), the rest of the time an
   intercept paid once; the cost model's prior times ``UNMEASURED_MARGIN`` before the effect's
   first traced frame;
@@ -87,8 +89,13 @@ class ItemCosts:
         rays = np.maximum(np.nan_to_num(np.asarray(rays, np.float64), nan=0.0, posinf=MAX_MS), 0.0)
         out = np.empty_like(rays)
         for j, effect in enumerate(EFFECTS):
-            _, scale, exponent, embree = self._fit[effect]
-            out[:, j] = np.maximum(scale * rays[:, j] ** exponent, embree * rays[:, j])
+            _, scale, exponent, embree, largest = self._fit[effect]
+            # Beyond the largest item measured, the slowest growth measured (MIN_EXPONENT): an
+            # optimistic price, so an item larger than any traced yet is tried and measured once
+            # (its first traced frame corrects the fit) instead of being priced out for good.
+            within = np.minimum(rays[:, j], largest)
+            beyond = np.where(within > 0, rays[:, j] / np.where(within > 0, within, 1.0), 1.0)
+            out[:, j] = np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays[:, j])
         return out
 
     def tick(self, wanted, traced) -> None:
@@ -178,9 +185,10 @@ class ItemCosts:
                 self._pooled[j] = float(np.median(measured))
 
 
-def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float]:
-    """(fixed ms, scale, exponent, Embree's ms a ray) from a window of (rays, ms, setup ms, Embree
-    ms, items): an item of r rays costs max(scale x r ** exponent, Embree's ms a ray x r).  The
+def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]:
+    """(fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
+    (rays, ms, setup ms, Embree ms, items): an item of r rays costs max(scale x r ** exponent,
+    Embree's ms a ray x r), growing as r ** MIN_EXPONENT beyond the largest item measured.  The
     timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
     casters is not counted twice)."""
     data = np.asarray(samples, np.float64)
@@ -207,16 +215,16 @@ def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float]:
         exponent = float(np.clip(np.median(np.log(y[j] / y[i])[apart] / np.log(x[j] / x[i])[apart]),
                                  MIN_EXPONENT, 1.0))
         scale = float(np.median(y[usable] / x[usable] ** exponent))
-        return float(np.median(setup)), scale, exponent, embree
+        return float(np.median(setup)), scale, exponent, embree, float(np.max(x[usable]))
     # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
     # fixed part paid once (its intercept).
     per_ray = EMBREE_FACTOR * embree
     intercept = float(np.clip(np.median(rest - per_ray * rays), 0.0, float(rest.min())))
     if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
         per_ray = float(np.median(np.maximum(rest - intercept, 0.0) / rays))
-    return float(np.median(setup)) + intercept, per_ray, 1.0, embree
+    return float(np.median(setup)) + intercept, per_ray, 1.0, embree, np.inf
 
 
-def _prior(effect) -> tuple[float, float, float, float]:
+def _prior(effect) -> tuple[float, float, float, float, float]:
     """Before an effect's first traced frame: the cost model's prior ms a ray, margined."""
-    return 0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN, 1.0, 0.0
+    return 0.0, MS_PER_RAY_PRIOR[effect] * UNMEASURED_MARGIN, 1.0, 0.0, np.inf

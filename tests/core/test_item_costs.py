@@ -56,7 +56,7 @@ def test_a_spread_of_ray_counts_fits_the_power_law():
     costs = ItemCosts()
     for casters in ([180], [840], [500, 500], [180], [840], [2000]):
         power_frame(costs, casters)
-    fixed, scale, exponent, _ = costs._fit["shadows"]
+    fixed, scale, exponent, _, _ = costs._fit["shadows"]
     assert exponent == pytest.approx(0.6, rel=1e-6) and scale == pytest.approx(0.05, rel=1e-6)
     assert fixed == pytest.approx(3.0)
     names, expected = ["Oak"], np.array([[22000.0, 0, 0]])
@@ -69,7 +69,7 @@ def test_an_item_never_costs_less_than_its_rays_inside_embree():
     costs = ItemCosts()
     for casters in ([180], [840], [180], [840]):
         power_frame(costs, casters, exponent=0.3, embree=1e-3)
-    _, _, exponent, embree = costs._fit["shadows"]
+    _, _, exponent, embree, _ = costs._fit["shadows"]
     assert exponent == pytest.approx(item_costs.MIN_EXPONENT) and embree == pytest.approx(1e-3)
     assert costs.predict(["Oak"], np.array([[1e6, 0, 0]]), [1.0])[0, 0] == pytest.approx(1e6 * 1e-3)
 
@@ -124,3 +124,22 @@ def test_a_reduced_rate_costs_its_share_of_the_rays_plus_its_reconstruction():
     assert by_rate[1.0] == pytest.approx(ray_ms(4000))
     assert by_rate[0.25] == pytest.approx(ray_ms(1000) + per_pixel * 1500)
     assert by_rate[0.5] == pytest.approx(ray_ms(2000) + per_pixel * 1000)
+
+
+def test_an_item_beyond_the_largest_measured_grows_at_the_slowest_exponent():
+    """Small casters measured growing linearly (180 to 2,000 rays an item): a 22,000-ray caster never
+    traced is priced as the largest measured item grown as rays ** MIN_EXPONENT (optimistic, so it is
+    tried once), not the small ones' line extrapolated 11x; within the measured range, the fit."""
+    costs = ItemCosts()
+    for casters in ([180], [840], [500, 500], [180], [840], [2000]):
+        power_frame(costs, casters, exponent=1.0, scale=1e-3, embree=1e-5)
+    _, scale, exponent, _, largest = costs._fit["shadows"]
+    assert exponent == pytest.approx(1.0) and largest == pytest.approx(2000)
+    within = costs.predict(["C"], np.array([[1000.0, 0, 0]]), [1.0])[0, 0]
+    assert within == pytest.approx(1e-3 * 1000, rel=1e-6)
+    oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
+    assert oak == pytest.approx(1e-3 * 2000 * 11 ** item_costs.MIN_EXPONENT, rel=1e-6)
+    assert oak < 22000 * 1e-3
+    # Once a large caster is measured, its own ms stand (the window's fit reaches it).
+    power_frame(costs, [22000], exponent=1.0, scale=1e-3, embree=1e-5)
+    assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(22.0, rel=1e-6)
