@@ -31,7 +31,7 @@ DEFAULT_PATHS = "arcade/path3,atrium/path2,atrium/path3,showcase/orbit"
 DEFAULT_BUDGETS = "0.1,0.25,0.5,0.75,0.9"
 DEFAULT_VARIANTS = "measured,error,benefit,tiers"
 COLUMNS = ("path", "variant", "budget_at", "budget_ms", "captured", "captured_lo", "captured_hi", "judged_frames",
-           "popping", "item_popping", "p95_over_budget", "raster_p95_over_budget", "within_budget", "flip", "mean_ms",
+           "popping", "item_popping", "flips_per_100", "max_flips_10", "p95_over_budget", "raster_p95_over_budget", "within_budget", "flip", "mean_ms",
            "first_frame_ms")
 ORBIT_RADIUS = 9.0
 ORBIT_HEIGHT = 3.5
@@ -106,8 +106,20 @@ def evaluate(args) -> list:
                 continue
             floor = (raster_p95 / float(row["budget_ms"])) if raster_p95 and row.get("budget_ms") else ""
             table.append({"path": target, "variant": row.get("variant_name") or row["variant"],
-                          **{key: row.get(key, "") for key in COLUMNS[2:]}, "raster_p95_over_budget": floor})
+                          **{key: row.get(key, "") for key in COLUMNS[2:]}, "raster_p95_over_budget": floor,
+                          "max_flips_10": _max_flips(sweep_dir / row["run"] / "selection.csv")})
     return table
+
+
+def _max_flips(selection_csv: Path):
+    """The most flips one element made in 10 consecutive frames of a run ("" without its log)."""
+    from phrt.phrt_addon.runs.summary import max_flips_in_window
+    if not selection_csv.is_file():
+        return ""
+    with open(selection_csv, newline="", encoding="utf-8") as handle:
+        rows = [{"frame": int(row["frame"]), "element": row["element"], "selected": row["selected"] == "1"}
+                for row in csv.DictReader(handle)]
+    return max_flips_in_window(rows, 10)
 
 
 def _number(text, spec):
@@ -115,9 +127,9 @@ def _number(text, spec):
 
 
 def markdown(table) -> str:
-    lines = ["| Path | Variant | Budget at | Budget ms | Captured [90%] | Judged | LDR-FLIP | Pops / 100 frames "
-             "| of which items | p95 / budget | raster p95 / budget | Within budget |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| Path | Variant | Budget at | Budget ms | Captured [90%] | Judged | LDR-FLIP | Popping / 100 frames "
+             "| of which items | Flips / 100 frames | Max flips in 10 frames | p95 / budget | raster p95 / budget | Within budget |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in table:
         interval = (f" [{_number(row['captured_lo'], '.2f')}, {_number(row['captured_hi'], '.2f')}]"
                     if row["captured_lo"] not in ("", None) else "")
@@ -125,7 +137,8 @@ def markdown(table) -> str:
         lines.append(f"| {row['path']} | {row['variant']} | {_number(row['budget_at'], '.2f')} | "
                      f"{_number(row['budget_ms'], '.0f')} | {_number(row['captured'], '.2f')}{interval} | "
                      f"{row['judged_frames']} | {_number(row['flip'], '.4f')} | {_number(row['popping'], '.1f')} | "
-                     f"{_number(row.get('item_popping'), '.1f')} | "
+                     f"{_number(row.get('item_popping'), '.1f')} | {_number(row.get('flips_per_100'), '.1f')} | "
+                     f"{row.get('max_flips_10', '')} | "
                      f"{_number(row['p95_over_budget'], '.2f')} | {_number(row.get('raster_p95_over_budget'), '.2f')} | "
                      f"{within} |")
     return "\n".join(lines) + "\n"

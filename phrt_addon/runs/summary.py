@@ -79,6 +79,30 @@ def flips_per_element_per_100(selection_rows):
     return rates
 
 
+def max_flips_in_window(selection_rows, window: int = 10) -> int:
+    """The most flips any element made within ``window`` consecutive frames (issue 20: "no
+    element flips more than twice in 10 frames").  Flips as in :func:`flips_per_element_per_100`:
+    a change of ``selected`` between two consecutive frames in which the element has a row; a
+    flip belongs to the later frame, and a window holds the flips of ``window`` frames in a row
+    (by frame number), so it spans ``window - 1`` transitions of frames that all have rows."""
+    by_element = {}
+    for row in selection_rows:
+        if row.get("selected") is not None:
+            by_element.setdefault(str(row["element"]), []).append((int(row["frame"]), bool(row["selected"])))
+    most = 0
+    for states in by_element.values():
+        states.sort()
+        frames = np.array([frame for frame, _ in states], np.int64)
+        selected = np.array([state for _, state in states], bool)
+        flip_frames = frames[1:][selected[1:] != selected[:-1]]
+        if flip_frames.size == 0:
+            continue
+        # Flips in the frames [f, f + window - 2] after a frame f: window - 1 transitions.
+        ends = np.searchsorted(flip_frames, flip_frames + (window - 1), side="left")
+        most = max(most, int(np.max(ends - np.arange(flip_frames.size))))
+    return most
+
+
 def machine_info():
     """CPU model and core counts of this machine."""
     model = None
