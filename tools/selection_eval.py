@@ -117,8 +117,8 @@ def _max_flips(selection_csv: Path):
     if not selection_csv.is_file():
         return ""
     with open(selection_csv, newline="", encoding="utf-8") as handle:
-        rows = [{"frame": int(row["frame"]), "element": row["element"], "selected": row["selected"] == "1"}
-                for row in csv.DictReader(handle)]
+        rows = [{"frame": int(row["frame"]), "element": row["element"], "selected": row["selected"] == "1",
+                 "visible": row.get("visible", "1") == "1"} for row in csv.DictReader(handle)]
     return max_flips_in_window(rows, 10)
 
 

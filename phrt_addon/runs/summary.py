@@ -81,23 +81,27 @@ def flips_per_element_per_100(selection_rows):
 
 def max_flips_in_window(selection_rows, window: int = 10) -> int:
     """The most flips any element made within ``window`` consecutive frames (issue 20: "no
-    element flips more than twice in 10 frames").  Flips as in :func:`flips_per_element_per_100`:
-    a change of ``selected`` between two consecutive frames in which the element has a row; a
-    flip belongs to the later frame, and a window holds the flips of ``window`` frames in a row
-    (by frame number), so it spans ``window - 1`` transitions of frames that all have rows."""
+    element flips more than twice in 10 frames").  A flip is a change of ``selected`` between two
+    consecutive rows of the element (by frame number) in both of which it is visible (a row's
+    ``visible``; rows without it count as visible): an element leaving or entering the view is
+    no switch between raster and ray tracing that anyone sees.  A flip belongs to the later
+    frame; a window holds the flips between ``window`` frames in a row (``window - 1`` of them)."""
     by_element = {}
     for row in selection_rows:
         if row.get("selected") is not None:
-            by_element.setdefault(str(row["element"]), []).append((int(row["frame"]), bool(row["selected"])))
+            by_element.setdefault(str(row["element"]), []).append(
+                (int(row["frame"]), bool(row["selected"]), bool(row.get("visible", True))))
     most = 0
     for states in by_element.values():
         states.sort()
-        frames = np.array([frame for frame, _ in states], np.int64)
-        selected = np.array([state for _, state in states], bool)
-        flip_frames = frames[1:][selected[1:] != selected[:-1]]
+        frames = np.array([state[0] for state in states], np.int64)
+        selected = np.array([state[1] for state in states], bool)
+        visible = np.array([state[2] for state in states], bool)
+        flip = (selected[1:] != selected[:-1]) & visible[1:] & visible[:-1]
+        flip_frames = frames[1:][flip]
         if flip_frames.size == 0:
             continue
-        # Flips in the frames [f, f + window - 2] after a frame f: window - 1 transitions.
+        # The flips into frames f .. f + window - 2: between the window frames f - 1 .. f + window - 2.
         ends = np.searchsorted(flip_frames, flip_frames + (window - 1), side="left")
         most = max(most, int(np.max(ends - np.arange(flip_frames.size))))
     return most

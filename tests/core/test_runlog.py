@@ -223,15 +223,19 @@ def test_output_dir_problem_refuses_a_folder_under_a_file_and_creates_nothing(tm
 
 def test_max_flips_in_a_window_of_10_frames():
     """Issue 20's "no element flips more than twice in 10 frames": the most flips of one element
-    among any 10 consecutive frames (9 transitions), others' flips not added to it."""
-    def rows(name, states, start=1):
-        return [{"frame": start + i, "element": name, "selected": state} for i, state in enumerate(states)]
+    among any 10 consecutive frames, others' flips not added to it; leaving the view is no flip."""
+    def rows(name, states, start=1, visible=None):
+        return [{"frame": start + i, "element": name, "selected": state,
+                 **({} if visible is None else {"visible": visible[i]})} for i, state in enumerate(states)]
     steady = rows("steady", [True] * 30)
-    # Flips at frames 2, 3 and 10 (within frames 2..10: 3), then 25 alone.
+    # Flips into frames 2, 3 and 10 (all between frames 1..10: 3), then 25 alone.
     blinking = rows("blink", [False, True, False] + [False] * 6 + [True] * 15 + [False] * 6)
     assert run_summary.max_flips_in_window(steady + blinking) == 3
-    # Frames 2 and 11 are 10 frames apart: not in one window of 10 frames.
+    # Flips into frames 2 and 11: frames 1..11 are 11 frames, not one window of 10.
     apart = rows("apart", [False, True] + [True] * 8 + [False] * 5)
     assert run_summary.max_flips_in_window(apart) == 1
     assert run_summary.max_flips_in_window(rows("every", [i % 2 == 0 for i in range(40)])) == 9
+    # Selected, out of view (so not selected), back and selected: no flip anyone saw.
+    assert run_summary.max_flips_in_window(rows("away", [True, False, False, True],
+                                                visible=[True, False, False, True])) == 0
     assert run_summary.max_flips_in_window([]) == 0
