@@ -156,8 +156,12 @@ class FrameRenderer:
                                         cost_mode=settings.cost_mode, relevance=settings.relevance,
                                         order=settings.selection_order, budget_at=settings.budget_at),
             self.cost_model, frame=snapshot.frame,
-            # The time left is measured after this frame's raster half, not predicted for it.
-            raster_ms=max(raster_ms - raster.setup_ms, 0.0))
+            # The time left is measured after this frame's raster half, not predicted for it.  The
+            # BENEFIT priors' read-back of the layers is the one the trace stage would do (its fixed
+            # overhead, charged against T, holds it): not taken from T twice.  It was, every
+            # PRIOR_EVERY frames, and items that just fit were dropped for that frame and taken
+            # back the next (atrium path2 at 0.5: flips 8 frames apart).
+            raster_ms=max(raster_ms - raster.setup_ms - (readback_ms if need_priors else 0.0), 0.0))
         choice = item_priors = None
         pixels = item_benefit.item_pixels(area_px, footprint)  # what each (element, effect) item changes
         if use_benefit and self.forced_selection is None:
