@@ -233,3 +233,22 @@ def test_the_share_a_reduced_rate_keeps_is_learned_per_effect():
     assert before == benefit_selection.TIER_KEEP[0.25]
     assert 0.4 < after < before
     assert selector.keep("refractions", 0.25) == before  # per effect
+
+
+def test_the_priors_read_back_is_not_taken_from_the_time_left_twice(monkeypatch):
+    """A frame that reads the layers for the material priors before the selection: the time left
+    is measured after the raster half without that read-back (the trace stage skips its own, and
+    its fixed overhead, charged against T, holds it); it was charged twice every PRIOR_EVERY frames."""
+    from phrt.phrt_addon import frame as frame_module
+    seen = []
+    select = frame_module.heuristic.select
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["raster_ms"])
+        return select(*args, **kwargs)
+
+    monkeypatch.setattr(frame_module.heuristic, "select", spy)
+    result, _, _ = render(benefit_mirror_scene(block_shadows=True))
+    stats = result.stats
+    assert stats["readback_ms"] > 0  # the first frame computes its priors from the layers
+    assert seen[0] == pytest.approx(max(stats["raster_ms"] - stats["readback_ms"], 0.0), abs=1e-6)
