@@ -107,19 +107,17 @@ def evaluate(args) -> list:
             floor = (raster_p95 / float(row["budget_ms"])) if raster_p95 and row.get("budget_ms") else ""
             table.append({"path": target, "variant": row.get("variant_name") or row["variant"],
                           **{key: row.get(key, "") for key in COLUMNS[2:]}, "raster_p95_over_budget": floor,
-                          "max_flips_10": _max_flips(sweep_dir / row["run"] / "selection.csv")})
+                          "max_flips_10": _max_flips(sweep_dir / row["run"])})
     return table
 
 
-def _max_flips(selection_csv: Path):
+def _max_flips(run_dir: Path):
     """The most flips one element made in 10 consecutive frames of a run ("" without its log)."""
+    from phrt.phrt_addon.runs import run_files
     from phrt.phrt_addon.runs.summary import max_flips_in_window
-    if not selection_csv.is_file():
+    if not (run_dir / "selection.csv").is_file():
         return ""
-    with open(selection_csv, newline="", encoding="utf-8") as handle:
-        rows = [{"frame": int(row["frame"]), "element": row["element"], "selected": row["selected"] == "1",
-                 "visible": row.get("visible", "1") == "1"} for row in csv.DictReader(handle)]
-    return max_flips_in_window(rows, 10)
+    return max_flips_in_window(run_files.iter_selection(run_dir), 10)
 
 
 def _number(text, spec):

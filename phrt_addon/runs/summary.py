@@ -54,6 +54,22 @@ def summarize(frame_rows, selection_rows):
     }
 
 
+def _element_states(selection_rows):
+    """{element: (frames, selected, visible)} arrays sorted by frame, from the rows with a
+    ``selected`` value (a row without ``visible`` counts as visible)."""
+    by_element = {}
+    for row in selection_rows:
+        if row.get("selected") is not None:
+            by_element.setdefault(str(row["element"]), []).append(
+                (int(row["frame"]), bool(row["selected"]), bool(row.get("visible", True))))
+    out = {}
+    for element, states in by_element.items():
+        states.sort()
+        frames, selected, visible = zip(*states)
+        out[element] = (np.array(frames, np.int64), np.array(selected, bool), np.array(visible, bool))
+    return out
+
+
 def flips_per_element_per_100(selection_rows):
     """Selection flips of each element per 100 frames of the run.
 
@@ -62,21 +78,12 @@ def flips_per_element_per_100(selection_rows):
     count is normalised by the run's length: the number of distinct frames in
     ``selection_rows``.  Returns ``{element: flips * 100 / frames}``.
     """
-    rows = [row for row in selection_rows if row.get("selected") is not None]
-    frame_count = len({int(row["frame"]) for row in rows})
+    states = _element_states(selection_rows)
+    frame_count = len({int(frame) for frames, _, _ in states.values() for frame in frames})
     if frame_count == 0:
         return {}
-    by_element = {}
-    for row in rows:
-        by_element.setdefault(str(row["element"]), []).append(
-            (int(row["frame"]), bool(row["selected"])))
-    rates = {}
-    for element, states in by_element.items():
-        states.sort()
-        selected = np.array([state for _, state in states], dtype=bool)
-        flips = int(np.count_nonzero(selected[1:] != selected[:-1]))
-        rates[element] = 100.0 * flips / frame_count
-    return rates
+    return {element: 100.0 * int(np.count_nonzero(selected[1:] != selected[:-1])) / frame_count
+            for element, (_, selected, _) in states.items()}
 
 
 def max_flips_in_window(selection_rows, window: int = 10) -> int:
@@ -86,24 +93,13 @@ def max_flips_in_window(selection_rows, window: int = 10) -> int:
     ``visible``; rows without it count as visible): an element leaving or entering the view is
     no switch between raster and ray tracing that anyone sees.  A flip belongs to the later
     frame; a window holds the flips between ``window`` frames in a row (``window - 1`` of them)."""
-    by_element = {}
-    for row in selection_rows:
-        if row.get("selected") is not None:
-            by_element.setdefault(str(row["element"]), []).append(
-                (int(row["frame"]), bool(row["selected"]), bool(row.get("visible", True))))
     most = 0
-    for states in by_element.values():
-        states.sort()
-        frames = np.array([state[0] for state in states], np.int64)
-        selected = np.array([state[1] for state in states], bool)
-        visible = np.array([state[2] for state in states], bool)
-        flip = (selected[1:] != selected[:-1]) & visible[1:] & visible[:-1]
-        flip_frames = frames[1:][flip]
-        if flip_frames.size == 0:
-            continue
-        # The flips into frames f .. f + window - 2: between the window frames f - 1 .. f + window - 2.
-        ends = np.searchsorted(flip_frames, flip_frames + (window - 1), side="left")
-        most = max(most, int(np.max(ends - np.arange(flip_frames.size))))
+    for frames, selected, visible in _element_states(selection_rows).values():
+        flip_frames = frames[1:][(selected[1:] != selected[:-1]) & visible[1:] & visible[:-1]]
+        if flip_frames.size:
+            # The flips into frames f .. f + window - 2: between the window frames f - 1 .. f + window - 2.
+            ends = np.searchsorted(flip_frames, flip_frames + (window - 1), side="left")
+            most = max(most, int(np.max(ends - np.arange(flip_frames.size))))
     return most
 
 

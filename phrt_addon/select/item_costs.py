@@ -95,7 +95,7 @@ class ItemCosts:
             # optimistic price, so an item larger than any traced yet is tried and measured once
             # (its first traced frame corrects the fit) instead of being priced out for good.
             within = np.minimum(rays[:, j], largest)
-            beyond = np.where(within > 0, rays[:, j] / np.where(within > 0, within, 1.0), 1.0)
+            beyond = np.divide(rays[:, j], within, out=np.ones_like(within), where=within > 0)
             out[:, j] = np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays[:, j])
         return out
 
