@@ -23,9 +23,19 @@ Switching cost
     Changing an item's state pops its pixels by about its own value (what tracing changes
     there), so dropping a selected item costs ``SWITCH`` times its value and adding one costs
     the same: a rival must be worth (1 + SWITCH) / (1 - SWITCH) times more to displace it;
-    a clearly better item wins at once.  An item not traced last frame must also fit with
-    ``ADD_SLACK`` to spare, so the frame-to-frame noise of the time left does not toggle the
-    item that just fits.
+    a clearly better item wins at once.
+A band in time
+    The time left moves from frame to frame with the raster half's own noise (atrium path1 at
+    0.75 of the way: 2 to 26 ms on consecutive frames of a 63 ms budget); without a band every
+    move forces a drop or allows an add.  An item not traced last frame must fit with
+    ``ADD_SLACK`` to spare in the time left the recent frames could count on (the
+    ``STEADY_QUANTILE``-th percentile of the last ``STEADY_FRAMES``, this one's included), not in
+    this frame's peak.  An item traced last frame, and an effect whose fixed part was paid last
+    frame, are charged ``HOLD`` less than predicted (the overrun this allows is at most
+    HOLD / (1 - HOLD) of the time left).  An item dropped while it could still compete waits
+    ``REST`` frames before it is added again, and so does every item of an element whose last
+    traced item was dropped (the pop is the element's, whichever effect comes back); an item
+    that left the view does not wait when it returns.
 Cost
     Per item from ``item_costs`` (its expected rays times its learned rays ratio times the
     effect's learned ms per ray; Q = 1 is the measured cost, a designer's Q scales it), plus per
@@ -60,6 +70,14 @@ SWITCH = 0.25
 # An item not traced last frame is charged this share more than its predicted ms: it must fit
 # with room to spare, so the time left's frame-to-frame noise does not toggle it.
 ADD_SLACK = 0.25
+# An item traced last frame is charged this share less (it keeps its place through the time
+# left's noise); an item dropped while it competed waits REST frames before it is added again.
+HOLD = 0.1
+REST = 4
+# An item not traced last frame must fit (with ADD_SLACK) in the STEADY_QUANTILE-th percentile of
+# the time left over the last STEADY_FRAMES frames (this one included).
+STEADY_FRAMES = 8
+STEADY_QUANTILE = 25
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
@@ -82,6 +100,7 @@ MEASURE_EVERY = 2
 # frames, and on any frame with a visible candidate that has none yet.
 PRIOR_EVERY = 8
 MAX_VALUE = 1e15
+NO_ROOM = 1e12  # the add factor when the recent frames left no time at all
 
 
 @dataclass
@@ -123,6 +142,9 @@ class BenefitSelector:
         self.observations: dict[tuple[str, str], int] = {}
         self.waited: dict[tuple[str, str], int] = {}
         self.previous: set[tuple[str, str]] = set()
+        self.dropped_at: dict[tuple[str, str], int] = {}  # item -> self.frames when it was last dropped
+        self.element_dropped_at: dict[str, int] = {}  # element -> self.frames when its last item was dropped
+        self.recent_available = deque(maxlen=STEADY_FRAMES)  # the time left (less overhead) of recent frames
         self.previous_rate: dict[tuple[str, str], float] = {}
         self.prior_cache: dict[str, np.ndarray] = {}  # element name -> (3,) its last computed priors
         self.priors_at = None  # self.frames when the priors were last computed
@@ -173,6 +195,14 @@ class BenefitSelector:
         available = max(float(time_left_ms) - float(overhead_ms), 0.0)
         margin = self.margin_ms(available)
         capacity = max(available - margin, 0.0)
+        # Adds are sized for the time left the recent frames could be counted on (STEADY_QUANTILE
+        # of the last STEADY_FRAMES), not for this frame's peak: an item added on a frame of
+        # uncommon room would be dropped again on the next ordinary one.
+        self.recent_available.append(available)
+        steady = float(np.percentile(np.asarray(self.recent_available), STEADY_QUANTILE))
+        # No steady time at all: nothing new is added (a finite factor, so a 0 ms cost stays a number).
+        add_factor = (1.0 + ADD_SLACK) * (available / steady if 0.0 < steady < available else
+                                          (1.0 if steady > 0.0 else NO_ROOM))
         fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
             np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
         if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
@@ -186,13 +216,23 @@ class BenefitSelector:
                 eligible[:, j] &= probe
 
         was = np.zeros_like(eligible)
+        resting = np.zeros_like(eligible)
         for i, name in enumerate(names):
             for j, effect in enumerate(EFFECTS):
                 was[i, j] = (name, effect) in self.previous
+                dropped = self.dropped_at.get((name, effect))
+                resting[i, j] = dropped is not None and self.frames - dropped < REST
+        # An element none of whose items is traced since it was dropped rests as a whole: a pop
+        # is the element's, whichever of its effects comes back.
+        element_resting = np.array([self.frames - self.element_dropped_at.get(name, -REST) < REST
+                                    for name in names], bool).reshape(len(names))
+        may_add = eligible & ~(~was & (resting | element_resting[:, None]))
+        held = was.any(axis=0)  # the effects whose fixed part was paid last frame
+        charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * add_factor / (1.0 + ADD_SLACK))
         switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
         waited = np.array([[self.waited.get((name, effect), 0) for effect in EFFECTS] for name in names],
                           np.float64).reshape(eligible.shape)
-        explore = eligible & fresh & (cost * (1.0 + ADD_SLACK) <= capacity)
+        explore = may_add & fresh & (cost * add_factor <= capacity)
         bonus = np.zeros(eligible.shape)
         if np.any(explore):
             total = float(switched[eligible].sum()) + 1e-12
@@ -202,14 +242,15 @@ class BenefitSelector:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
         tier_costs = np.clip(np.nan_to_num(np.asarray(tier_costs, np.float64), nan=np.inf), 0.0, np.inf)
         if tiers:
-            rate = self._choose_rates(names, eligible, value, bonus, was, tier_costs, capacity, fixed)
+            rate = self._choose_rates(names, may_add, value, bonus, was, tier_costs, capacity, charged_fixed,
+                                      add_factor)
             chosen = rate > 0
         else:
-            charged = np.where(was, cost, cost * (1.0 + ADD_SLACK))
-            flat = knapsack.solve_grouped(np.where(eligible, switched + bonus, 0.0).ravel(),
-                                          np.where(eligible, charged, np.inf).ravel(),
-                                          np.tile(np.arange(len(EFFECTS)), len(eligible)), fixed, capacity)
-            chosen = flat.reshape(eligible.shape) & eligible
+            charged = np.where(was, cost * (1.0 - HOLD), cost * add_factor)
+            flat = knapsack.solve_grouped(np.where(may_add, switched + bonus, 0.0).ravel(),
+                                          np.where(may_add, charged, np.inf).ravel(),
+                                          np.tile(np.arange(len(EFFECTS)), len(eligible)), charged_fixed, capacity)
+            chosen = flat.reshape(eligible.shape) & may_add
             rate[chosen] = 1.0
         spent = np.zeros(eligible.shape)
         for option, tier in enumerate(TIER_RATES):
@@ -223,7 +264,8 @@ class BenefitSelector:
         items measured at that rate right after a full-rate measurement, ``TIER_KEEP`` before."""
         return self.kept.get((effect, tier), TIER_KEEP[tier])
 
-    def _choose_rates(self, names, eligible, value, bonus, was, tier_costs, capacity, fixed) -> np.ndarray:
+    def _choose_rates(self, names, eligible, value, bonus, was, tier_costs, capacity, fixed,
+                      add_factor=1.0 + ADD_SLACK) -> np.ndarray:
         """(n, 3) rate per item (0: not traced) by the multiple-choice knapsack over TIER_RATES:
         an option's value is the item's value x its kept share, its cost ``tier_costs``, each
         effect's ``fixed`` part paid once if any of its items is traced; the switching cost counts
@@ -240,7 +282,8 @@ class BenefitSelector:
                 same = was[i, j] and before == tier
                 factor = (1.0 + SWITCH) if same else (1.0 if was[i, j] else 1.0 - SWITCH)
                 values[row, option] = value[i, j] * self.keep(EFFECTS[j], tier) * factor + bonus[i, j]
-                costs[row, option] = tier_costs[i, j, option] * (1.0 if same else 1.0 + ADD_SLACK)
+                costs[row, option] = tier_costs[i, j, option] * \
+                    ((1.0 - HOLD) if same else (1.0 if was[i, j] else add_factor))
         picked = knapsack.solve_choices(values, costs, capacity, groups=items[:, 1], group_costs=fixed)
         rate = np.zeros(eligible.shape)
         for row, option in enumerate(picked.tolist()):
@@ -253,6 +296,12 @@ class BenefitSelector:
         """After the frame: ``measured`` (n, 3) summed differences per item where traced (None:
         not measured), ``pixels`` (n, 3) the pixels each item covers (its divisor)."""
         chosen = choice.chosen
+        # Dropped while it competed (not for leaving the view): it rests (REST).
+        for i, j in zip(*np.nonzero(choice.eligible & ~chosen)):
+            if (names[i], EFFECTS[j]) in self.previous:
+                self.dropped_at[(names[i], EFFECTS[j])] = self.frames
+                if not chosen[i].any():
+                    self.element_dropped_at[names[i]] = self.frames
         self.previous = {(names[i], EFFECTS[j]) for i, j in zip(*np.nonzero(chosen))}
         self.previous_rate = {(names[i], EFFECTS[j]): float(choice.rate[i, j]) for i, j in zip(*np.nonzero(chosen))}
         for i, name in enumerate(names):

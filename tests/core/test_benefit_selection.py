@@ -252,3 +252,115 @@ def test_the_priors_read_back_is_not_taken_from_the_time_left_twice(monkeypatch)
     stats = result.stats
     assert stats["readback_ms"] > 0  # the first frame computes its priors from the layers
     assert seen[0] == pytest.approx(max(stats["raster_ms"] - stats["readback_ms"], 0.0), abs=1e-6)
+
+
+def test_a_traced_item_holds_through_the_time_lefts_noise_and_an_added_one_needs_room_to_spare():
+    """The band in time (HOLD, ADD_SLACK): an item costing 10 ms is kept while the time left swings
+    around it (9-11 ms), and an item not traced last frame is added only with ADD_SLACK to spare."""
+    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.1, 0]], [[0, 10, 0]]
+
+    def measured_selector():
+        selector = BenefitSelector()
+        selector.estimates[("A", "reflections")] = 0.1  # measured before: no exploration bonus
+        return selector
+    added = choose(measured_selector(), names, pixels, priors, cost, 10.0 * (1 + benefit_selection.ADD_SLACK) - 0.1)
+    assert not added.chosen.any()  # fits, but without room to spare
+    selector = measured_selector()
+    added = choose(selector, names, pixels, priors, cost, 10.0 * (1 + benefit_selection.ADD_SLACK) + 0.1)
+    assert added.chosen[0, 1]
+    selector.observe(names, added, np.asarray(priors, float))
+    states = []
+    for frame in range(20):
+        choice = choose(selector, names, pixels, priors, cost, 9.0 if frame % 2 else 11.0)
+        states.append(bool(choice.chosen[0, 1]))
+        selector.observe(names, choice, np.asarray(priors, float))
+    assert all(states), states
+    # A real fall of the time left (below the held cost) drops it.
+    choice = choose(selector, names, pixels, priors, cost, 10.0 * (1 - benefit_selection.HOLD) - 0.1)
+    assert not choice.chosen.any()
+
+
+def test_an_item_dropped_while_it_competed_rests_before_it_is_added_again():
+    selector = BenefitSelector()
+    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.1, 0]], [[0, 10, 0]]
+    selector.estimates[("A", "reflections")] = 0.1
+    choice = choose(selector, names, pixels, priors, cost, 20.0)
+    assert choice.chosen[0, 1]
+    selector.observe(names, choice, np.asarray(priors, float))
+    dropped = choose(selector, names, pixels, priors, cost, 5.0)  # the time left fell: dropped
+    assert not dropped.chosen.any()
+    selector.observe(names, dropped, np.asarray(priors, float))
+    back = []
+    for _ in range(benefit_selection.REST + 1):
+        choice = choose(selector, names, pixels, priors, cost, 20.0)
+        back.append(bool(choice.chosen[0, 1]))
+        selector.observe(names, choice, np.asarray(priors, float))
+    # Dropped on one frame; back on the REST-th frame after it, not before.
+    assert back == [False] * (benefit_selection.REST - 1) + [True, True], back
+
+
+def test_an_item_that_left_the_view_does_not_rest_when_it_comes_back():
+    selector = BenefitSelector()
+    names, priors, cost = ["A"], [[0, 0.1, 0]], [[0, 10, 0]]
+    selector.estimates[("A", "reflections")] = 0.1
+    choice = choose(selector, names, [[0, 100, 0]], priors, cost, 20.0)
+    selector.observe(names, choice, np.asarray(priors, float))
+    gone = choose(selector, names, [[0, 0, 0]], priors, cost, 20.0)  # not visible: not eligible
+    assert not gone.chosen.any()
+    selector.observe(names, gone, np.asarray(priors, float))
+    back = choose(selector, names, [[0, 100, 0]], priors, cost, 20.0)
+    assert back.chosen[0, 1]
+
+
+def test_an_item_is_added_for_the_time_left_recent_frames_could_count_on_not_for_one_peak():
+    """Adds are sized for the STEADY_QUANTILE of the recent time left: one frame of uncommon room
+    does not add an item that the ordinary frames around it could not pay (it would be dropped
+    again on the next one); room that lasts does."""
+    selector = BenefitSelector()
+    names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.1, 0]], [[0, 10, 0]]
+    selector.estimates[("A", "reflections")] = 0.1
+    for _ in range(benefit_selection.STEADY_FRAMES):
+        choice = choose(selector, names, pixels, priors, cost, 8.0)  # does not fit
+        selector.observe(names, choice, np.asarray(priors, float))
+    peak = choose(selector, names, pixels, priors, cost, 20.0)  # one frame with room
+    assert not peak.chosen.any()
+    selector.observe(names, peak, np.asarray(priors, float))
+    states = []
+    for _ in range(benefit_selection.STEADY_FRAMES):  # the room lasts: taken within the window
+        choice = choose(selector, names, pixels, priors, cost, 20.0)
+        states.append(bool(choice.chosen[0, 1]))
+        selector.observe(names, choice, np.asarray(priors, float))
+    assert any(states) and states[-1], states
+
+
+def test_after_frames_with_no_time_left_nothing_is_added_and_no_nan_is_made():
+    selector = BenefitSelector()
+    names, pixels, priors = ["A", "Free"], [[0, 100, 0], [0, 100, 0]], [[0, 0.1, 0], [0, 0.1, 0]]
+    selector.estimates[("A", "reflections")] = selector.estimates[("Free", "reflections")] = 0.1
+    with np.errstate(invalid="raise", over="raise"):
+        for _ in range(benefit_selection.STEADY_FRAMES):
+            choice = choose(selector, names, pixels, priors, [[0, 10, 0], [0, 0, 0]], 0.0)
+            selector.observe(names, choice, np.asarray(priors, float))
+        choice = choose(selector, names, pixels, priors, [[0, 10, 0], [0, 0, 0]], 20.0)
+    assert not choice.chosen[0].any()  # the recent frames could not count on any time
+    assert np.all(np.isfinite(choice.cost_ms))
+
+
+def test_an_element_dropped_whole_rests_whichever_of_its_effects_would_come_back():
+    selector = BenefitSelector()
+    names, priors = ["A"], [[0.1, 0.1, 0]]
+    selector.estimates[("A", "shadows")] = selector.estimates[("A", "reflections")] = 0.1
+    # Its reflection is traced; then the time left falls and the element is dropped.
+    choice = choose(selector, names, [[10, 100, 0]], priors, [[1e3, 10, 0]], 20.0)
+    assert choice.chosen.tolist() == [[False, True, False]]
+    selector.observe(names, choice, np.asarray(priors, float))
+    dropped = choose(selector, names, [[10, 100, 0]], priors, [[1e3, 10, 0]], 5.0)
+    assert not dropped.chosen.any()
+    selector.observe(names, dropped, np.asarray(priors, float))
+    # Now its (never traced) shadow would fit: it rests with its element all the same.
+    states = []
+    for _ in range(benefit_selection.REST):
+        choice = choose(selector, names, [[10, 100, 0]], priors, [[2, 1e3, 0]], 20.0)
+        states.append(bool(choice.chosen.any()))
+        selector.observe(names, choice, np.asarray(priors, float))
+    assert states == [False] * (benefit_selection.REST - 1) + [True], states
