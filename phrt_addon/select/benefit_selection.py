@@ -26,8 +26,9 @@ Switching cost
     a clearly better item wins at once.
 A band in time
     The time left moves from frame to frame with the raster half's own noise (atrium path1 at
-    0.75 of the way: 2 to 26 ms on consecutive frames of a 63 ms budget); without a band every
-    move forces a drop or allows an add.  An item not traced last frame must fit with
+    0.75 of the way, a 63 ms budget: between 2 and 26 ms within 20 frames, often halving or
+    doubling from one frame to the next); without a band every move forces a drop or allows an
+    add.  An item not traced last frame must fit with
     ``ADD_SLACK`` to spare in the time left the recent frames could count on (the
     ``STEADY_QUANTILE``-th percentile of the last ``STEADY_FRAMES``, this one's included), not in
     this frame's peak.  An item traced last frame, and an effect whose fixed part was paid last
