@@ -201,9 +201,10 @@ class BenefitSelector:
         # uncommon room would be dropped again on the next ordinary one.
         self.recent_available.append(available)
         steady = float(np.percentile(np.asarray(self.recent_available), STEADY_QUANTILE))
-        # No steady time at all: nothing new is added (a finite factor, so a 0 ms cost stays a number).
-        add_factor = (1.0 + ADD_SLACK) * (available / steady if 0.0 < steady < available else
-                                          (1.0 if steady > 0.0 else NO_ROOM))
+        # How much this frame's time exceeds the steady one; no steady time at all: nothing new is
+        # added (a finite factor, so a 0 ms cost stays a number).
+        peak = available / steady if 0.0 < steady < available else (1.0 if steady > 0.0 else NO_ROOM)
+        add_factor = (1.0 + ADD_SLACK) * peak
         fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
             np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
         if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
@@ -229,7 +230,7 @@ class BenefitSelector:
                                     for name in names], bool).reshape(len(names))
         may_add = eligible & ~(~was & (resting | element_resting[:, None]))
         held = was.any(axis=0)  # the effects whose fixed part was paid last frame
-        charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * add_factor / (1.0 + ADD_SLACK))
+        charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * peak)
         switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
         waited = np.array([[self.waited.get((name, effect), 0) for effect in EFFECTS] for name in names],
                           np.float64).reshape(eligible.shape)
