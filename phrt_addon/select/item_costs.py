@@ -56,10 +56,18 @@ MIN_PAIRS = 3  # pairs of frames SPREAD apart in rays before the power law is fi
 # 22,000 rays 18 ms (the oracle's timing): about rays ** 0.6 (numpy's and Embree's per-call work
 # weighs on a small item, not on a large one).
 MIN_EXPONENT = 0.6
-# An effect with items that has not been traced for this many frames forgets what it learned (its
-# window and its items' ratios): a fixed or per-ray part learned too high would otherwise price it
-# out for the rest of the replay, never to be measured again; forgotten, it is probed afresh.
-STALE_FRAMES = 30
+# An effect with items that has not been traced for STALE_FRAMES frames revises what it learned:
+# a fixed or per-ray part learned too high (a first measurement that paid first-use work: the
+# showcase's first traced frames took 2-3x the steady ms a ray) would otherwise price it out for
+# the rest of the replay, never to be measured again.  Its window is cleared and its costs are
+# divided by STALE_DISCOUNT (not reset to the prior: a cost measured right, too dear for the time
+# left, is then not traced at once at a guessed price, a sure overrun); each revision doubles the
+# effect's idle frames before the next (STALE_FRAMES x 2 ** k, at most STALE_MAX_FRAMES): an effect
+# that really is too dear is probed less and less often.  Its items' rays ratios are kept (counted
+# rays, not timed).
+STALE_FRAMES = 8
+STALE_MAX_FRAMES = 128
+STALE_DISCOUNT = 2.0
 RATIO_SMOOTHING = 0.3
 RATIO_RANGE = (1e-3, 1e3)
 MAX_MS = 1e12
@@ -71,6 +79,8 @@ class ItemCosts:
     def __init__(self):
         self.samples = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # (rays, ms, setup ms, Embree ms)
         self.idle = np.zeros(len(EFFECTS), np.int64)  # frames each effect had items and was not traced
+        self.stale_after = np.full(len(EFFECTS), STALE_FRAMES, np.int64)  # idle frames before a revision
+        self.learned: set[str] = set()  # the effects measured at least once in this replay
         self.ratio: dict[tuple[str, str], float] = {}
         self._fit = {effect: _prior(effect) for effect in EFFECTS}
         self._pooled = np.ones(len(EFFECTS))
@@ -101,19 +111,22 @@ class ItemCosts:
 
     def tick(self, wanted, traced) -> None:
         """After a frame: ``wanted`` / ``traced`` (3,) bool, the effects that had eligible items /
-        that were traced.  An effect idle for STALE_FRAMES frames forgets its costs."""
+        that were traced.  An effect idle for its stale period revises its costs (STALE_*)."""
         wanted, traced = np.asarray(wanted, bool), np.asarray(traced, bool)
         self.idle = np.where(traced, 0, self.idle + (wanted & ~traced))
-        for j in np.flatnonzero(self.idle >= STALE_FRAMES):
+        for j in np.flatnonzero(self.idle >= self.stale_after):
             effect = EFFECTS[j]
-            self.samples[effect].clear()
-            self._fit[effect] = _prior(effect)
-            self.ratio = {key: value for key, value in self.ratio.items() if key[1] != effect}
-            self._pooled[j] = 1.0
+            if effect in self.learned:  # measured once: its costs divided (never: the prior stays)
+                fixed, scale, exponent, embree, largest = self._fit[effect]
+                self._fit[effect] = (fixed / STALE_DISCOUNT, scale / STALE_DISCOUNT, exponent,
+                                     embree / STALE_DISCOUNT, largest)
+                self.samples[effect].clear()
+            self.stale_after[j] = min(2 * self.stale_after[j], STALE_MAX_FRAMES)
             self.idle[j] = 0
 
     def unmeasured(self) -> np.ndarray:
-        """(3,) bool: the effects never measured in this replay."""
+        """(3,) bool: the effects not measured in this replay, or since their costs were last revised
+        (STALE_*): their next item traced is a probe."""
         return np.array([not self.samples[effect] for effect in EFFECTS])
 
     def measured(self, chosen) -> bool:
@@ -181,6 +194,7 @@ class ItemCosts:
             self.samples[effect].append((rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
                                          float(np.count_nonzero(chosen[:, j]))))
             self._fit[effect] = _fit(self.samples[effect], effect == "shadows")
+            self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
                 self._pooled[j] = float(np.median(measured))

@@ -143,3 +143,37 @@ def test_an_item_beyond_the_largest_measured_grows_at_the_slowest_exponent():
     # Once a large caster is measured, its own ms stand (the window's fit reaches it).
     power_frame(costs, [22000], exponent=1.0, scale=1e-3, embree=1e-5)
     assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(22.0, rel=1e-6)
+
+
+def test_an_idle_effect_revises_its_costs_by_halves_ever_more_rarely():
+    """An effect with items, not traced for STALE_FRAMES frames: its learned costs are divided by
+    STALE_DISCOUNT (not reset to the cheap prior: a cost measured right, too dear for the time
+    left, must not be traced at once at a guessed price), its next item is a probe, and the next
+    revision waits twice as long.  Its items' rays ratios are kept; a never-measured effect keeps
+    its prior."""
+    costs = ItemCosts()
+    expected = shadows_frame(costs, 1000, 36000, chosen_large=True)
+    before = costs.predict(NAMES, expected, np.ones(3))
+    ratios = costs.ratios(NAMES).copy()
+    prior = costs.per_ray_ms()[1]
+    wanted, idle = np.array([True, True, False]), np.zeros(3, bool)
+    for _ in range(item_costs.STALE_FRAMES - 1):
+        costs.tick(wanted, idle)
+    assert costs.predict(NAMES, expected, np.ones(3))[:, 0] == pytest.approx(before[:, 0])
+    assert not costs.unmeasured()[0]
+    costs.tick(wanted, idle)  # the STALE_FRAMES-th idle frame
+    after = costs.predict(NAMES, expected, np.ones(3))
+    assert after[:, 0] == pytest.approx(before[:, 0] / item_costs.STALE_DISCOUNT)
+    assert costs.fixed_ms()[0] > 0 and costs.unmeasured()[0]
+    assert costs.ratios(NAMES) == pytest.approx(ratios)
+    assert costs.per_ray_ms()[1] == pytest.approx(prior)  # reflections, never measured: the prior
+    # The next revision comes after twice the idle frames.
+    for _ in range(2 * item_costs.STALE_FRAMES - 1):
+        costs.tick(wanted, idle)
+    assert costs.predict(NAMES, expected, np.ones(3))[:, 0] == pytest.approx(after[:, 0])
+    costs.tick(wanted, idle)
+    assert costs.predict(NAMES, expected, np.ones(3))[:, 0] == pytest.approx(after[:, 0] / item_costs.STALE_DISCOUNT)
+    # A frame that traces the effect resets its idle count: no revision while it is traced.
+    for _ in range(10 * item_costs.STALE_MAX_FRAMES):
+        costs.tick(wanted, np.array([True, False, False]))
+    assert costs.idle[0] == 0 and costs.stale_after[0] <= item_costs.STALE_MAX_FRAMES
