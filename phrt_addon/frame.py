@@ -41,7 +41,7 @@ from .raster.gbuffer import element_pixel_stats, front_points
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
-from .trace.stage import TraceResult, TraceStage
+from .trace.stage import TraceResult, TraceStage, traced_effects
 
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
@@ -107,10 +107,11 @@ class FrameRenderer:
         learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR" \
             and not use_benefit
 
-        def read_layers():
+        def read_layers(elements=None):
             gbuffer = raster.gbuffer()
-            return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials),
-                    "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials)}
+            return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials, elements),
+                    "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials,
+                                               elements)}
 
         # The benefit priors read the materials under each element's pixels: under BENEFIT only when an
         # item visible now has no prior yet, or the cached ones are PRIOR_EVERY frames old (a frame
@@ -180,7 +181,7 @@ class FrameRenderer:
         if np.any(selected) and may_trace:
             if layers is None:  # only a frame that traces reads the layers back (a trace cost)
                 begin = _timer()
-                layers = read_layers()
+                layers = read_layers(self.ray_pixels(snapshot, selected, selection.effects))
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
                                                 effects=selection.effects,
@@ -271,6 +272,16 @@ class FrameRenderer:
         if self.forced_selection is None or not self.forced_rates:
             return None
         return {effect: np.full(n_elements, float(rate)) for effect, rate in self.forced_rates.items()}
+
+    @staticmethod
+    def ray_pixels(snapshot, selected, effects):
+        """(n + 1,) bool over element ids: the elements whose pixels the trace stage casts rays
+        from, when they are all it needs (reflections and refractions leave from their own
+        element's pixels); None when shadows are traced (their receivers are anyone's pixels)."""
+        wanted = traced_effects(snapshot.elements, selected, effects)
+        if np.any(wanted["shadows"]) and any(light.cast_shadows for light in snapshot.lights):
+            return None
+        return np.r_[wanted["reflections"] | wanted["refractions"], False]
 
     def _no_time_to_trace(self, settings, raster_ms) -> bool:
         """A budget in ms whose time left after this frame's raster half cannot pay the trace

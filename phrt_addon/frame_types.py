@@ -76,11 +76,19 @@ class FrameResult:
 
 class LayerPixels:
     """The covered pixels of one read-back G-buffer layer; per-pixel terms are computed only
-    for the subsets that get rays."""
+    for the subsets that get rays.  ``elements`` (optional, (n + 1,) bool over element ids, the
+    last for "no element"): only the pixels of those elements (a frame that traces reflections
+    and refractions only casts rays from its chosen elements' own pixels; gathering every
+    covered pixel cost 1.5 ms a layer at 320x240)."""
 
-    def __init__(self, layer, origin, camera, materials: shading.MaterialTable):
+    def __init__(self, layer, origin, camera, materials: shading.MaterialTable, elements=None):
         self.layer = layer
-        self.flat = np.flatnonzero(layer.covered.ravel())
+        covered = layer.covered.ravel()
+        if elements is not None:
+            keep = np.asarray(elements, bool)
+            ids = layer.element.ravel()
+            covered = covered & keep[np.where((ids >= 0) & (ids < len(keep) - 1), ids, len(keep) - 1)]
+        self.flat = np.flatnonzero(covered)
         self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
         self.origin = np.asarray(origin, np.float64)
         self.element = layer.element.ravel()[self.flat]

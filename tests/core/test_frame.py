@@ -10,6 +10,7 @@ import pytest
 from phrt.phrt_addon.scene import shading
 from phrt.phrt_addon.raster import shadowmap
 from phrt.phrt_addon.frame import FrameRenderer
+from phrt.phrt_addon.frame_types import LayerPixels
 from phrt.phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
 from phrt.phrt_addon.raster.reference_raster import ReferenceRaster
 from phrt.phrt_addon.scene.snapshot import Camera, Element, Light, Material, SceneSnapshot, Settings
@@ -178,3 +179,25 @@ def test_the_rays_counted_per_element_are_the_rays_the_effects_cast():
     assert element_rays[1] == pytest.approx(stats.effect_rays["shadows"])  # the block: shadows only
     assert element_rays.sum() == pytest.approx(result.stats["rays"])
     assert renderer.cost_model.state()["measured_residual"] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_a_frame_without_traced_shadows_gathers_only_its_traced_elements_pixels(monkeypatch):
+    """Reflections and refractions leave from their own element's pixels: without traced shadows
+    the layers are gathered for the chosen elements only, and the frame is the same, pixel for
+    pixel, as one gathered whole.  Traced shadows (a light, a selected caster) need every pixel."""
+    snapshot = mirror_scene("RAYTRACE", lights=False)
+    subset, gbuffer, _ = render(snapshot)
+    assert subset.stats["reflection_rays"] > 0
+    rays_from = FrameRenderer.ray_pixels(snapshot, np.array([True, True]), None)
+    assert rays_from.tolist() == [True, False, False]  # the mirror; the block only casts shadows
+    pixels = LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, shading.MaterialTable(snapshot.materials),
+                         rays_from)
+    assert len(pixels) == np.count_nonzero(gbuffer.opaque.element == 0) > 0
+    assert set(np.unique(pixels.element)) == {0}
+    with_light = mirror_scene("RAYTRACE", lights=True)
+    assert FrameRenderer.ray_pixels(with_light, np.array([True, True]), None) is None
+    assert FrameRenderer.ray_pixels(with_light, np.array([True, False]), None).tolist() == [True, False, False]
+    monkeypatch.setattr(FrameRenderer, "ray_pixels", staticmethod(lambda *args: None))
+    whole, _, _ = render(mirror_scene("RAYTRACE", lights=False))
+    assert whole.stats["reflection_rays"] == subset.stats["reflection_rays"]
+    np.testing.assert_array_equal(whole.passes.combined, subset.passes.combined)
