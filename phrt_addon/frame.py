@@ -236,6 +236,9 @@ class FrameRenderer:
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
         setup_ms = raster.setup_ms + counters.upload_ms + shade_setup_ms
+        if use_benefit and self.frames_rendered > 0:  # a steady frame (the reports' p95: one-time work out)
+            self.benefit_selector.observe_frame(max(total_ms - setup_ms, 0.0), selection.budget_ms,
+                                                traced=traced is not None)
         # One-time work (Embree builds, shader compiles, uploads, new shadow maps) is not a per-frame cost.
         self.cost_model.observe(FrameStats(
             raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
@@ -302,8 +305,9 @@ class FrameRenderer:
         overhead = self.cost_model.trace_overhead_ms()
         cost_ms = self.item_costs.predict(frame_elements.names, _expected_rays(frame_elements.area_px, effect_rays),
                                           frame_elements.rt_cost)
+        time_left = self.benefit_selector.aimed_time_left(selection.time_left_ms, selection.budget_ms)
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
-                                              cost_ms, selection.time_left_ms, overhead, tiers=tiers,
+                                              cost_ms, time_left, overhead, tiers=tiers,
                                               fixed_ms=self.item_costs.fixed_ms(),
                                               unmeasured=self.item_costs.unmeasured(),
                                               tier_costs=self.item_costs.tier_costs(

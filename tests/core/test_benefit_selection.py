@@ -364,3 +364,55 @@ def test_an_element_dropped_whole_rests_whichever_of_its_effects_would_come_back
         states.append(bool(choice.chosen.any()))
         selector.observe(names, choice, np.asarray(priors, float))
     assert states == [False] * (benefit_selection.REST - 1) + [True], states
+
+
+def test_the_aim_keeps_the_share_of_frames_over_budget_at_its_target():
+    """Frames of fixed planned work swing (lognormal, sigma 0.2: p95 about 1.39x the median): the
+    aim settles where AIM_SHARE of the frames end over AIM_OVER x the budget, whether the plan
+    started too greedy (every frame at the budget) or too timid (at 0.7 of it)."""
+    budget = 50.0
+    rng = np.random.default_rng(7)
+    for planned_share in (1.0, 0.7):
+        selector = BenefitSelector()
+        over = []
+        for frame in range(4000):
+            # The frame's time: what it planned (aim x the planned share of the budget) times the noise.
+            total = selector.aim * planned_share * budget * float(rng.lognormal(0.0, 0.2))
+            selector.observe_frame(total, budget)
+            over.append(total > benefit_selection.AIM_OVER * budget)
+        share = float(np.mean(over[1000:]))
+        assert abs(share - benefit_selection.AIM_SHARE) < 0.02, (planned_share, share)
+        # The aim found the multiple of the budget whose 95th percentile is AIM_OVER x the budget.
+        expected = benefit_selection.AIM_OVER / (planned_share * np.exp(0.2 * 1.645))
+        expected = float(np.clip(expected, *benefit_selection.AIM_RANGE))
+        assert selector.aim == pytest.approx(expected, rel=0.15)
+
+
+def test_the_aim_moves_the_knapsacks_time_left_within_its_range_and_ignores_bad_numbers():
+    selector = BenefitSelector()
+    assert selector.aimed_time_left(20.0, 100.0) == pytest.approx(20.0)
+    for _ in range(500):
+        selector.observe_frame(200.0, 100.0)  # every frame twice over
+    assert selector.aim == pytest.approx(benefit_selection.AIM_RANGE[0])
+    assert selector.aimed_time_left(20.0, 100.0) == 0.0  # 20 - 50, never below 0
+    for value in (np.nan, np.inf, -1.0):
+        selector.observe_frame(value, 100.0)
+        selector.observe_frame(50.0, value)
+    assert selector.aim == pytest.approx(benefit_selection.AIM_RANGE[0])
+    for _ in range(5000):
+        selector.observe_frame(10.0, 100.0)  # every frame well within
+    assert selector.aim == pytest.approx(benefit_selection.AIM_RANGE[1])
+    assert selector.aimed_time_left(20.0, 100.0) == pytest.approx(45.0)
+    assert np.isfinite(selector.aimed_time_left(20.0, np.nan))
+
+
+def test_a_frame_over_budget_that_traced_nothing_does_not_lower_the_aim():
+    selector = BenefitSelector()
+    for _ in range(100):
+        selector.observe_frame(200.0, 100.0, traced=False)  # the raster half alone overran
+    assert selector.aim == pytest.approx(1.0)
+    selector.observe_frame(200.0, 100.0, traced=True)
+    assert selector.aim < 1.0
+    before = selector.aim
+    selector.observe_frame(50.0, 100.0, traced=False)  # room left, nothing bought: the aim may rise
+    assert selector.aim > before
