@@ -310,6 +310,7 @@ class FrameRenderer:
                                               cost_ms, time_left, overhead, tiers=tiers,
                                               fixed_ms=self.item_costs.fixed_ms(),
                                               unmeasured=self.item_costs.unmeasured(),
+                                              visible=terms.visible,
                                               tier_costs=self.item_costs.tier_costs(
                                                   frame_elements.names, _expected_rays(frame_elements.area_px, effect_rays),
                                                   pixels, frame_elements.rt_cost) if tiers else None)

@@ -18,7 +18,8 @@ Value
 Exploration
     An item never measured gains a bonus that grows with the frames it waited, visible:
     after ``EXPLORE_FRAMES`` such frames it is worth more than every other item together, so
-    it is traced as soon as it fits the time left on its own.
+    it is traced as soon as it fits the time the items kept from last frame leave.  The bonus
+    competes with this frame's adds only: a guess never evicts a traced item (a pop each).
 Switching cost
     Changing an item's state pops its pixels by about its own value (what tracing changes
     there), so dropping a selected item costs ``SWITCH`` times its value and adding one costs
@@ -34,9 +35,16 @@ A band in time
     this frame's peak.  An item traced last frame, and an effect whose fixed part was paid last
     frame, are charged ``HOLD`` less than predicted (the overrun this allows is at most
     HOLD / (1 - HOLD) of the time left).  An item dropped while it could still compete waits
-    ``REST`` frames before it is added again, and so does every item of an element whose last
-    traced item was dropped (the pop is the element's, whichever effect comes back); an item
-    that left the view does not wait when it returns.
+    ``REST`` frames before it is added again; an item that left the view does not wait when it
+    returns.
+A guard on flips
+    The pop is the element's, whichever of its effects comes back.  An element's flip is a
+    change of its traced state between two frames in which it is visible (what
+    ``runs.summary.max_flips_in_window`` counts).  An element none of whose items is traced
+    is taken again only ``FLIP_GAP`` frames after its last flip, whatever the time left does:
+    so no element flips more than twice within FLIP_GAP + 1 frames (issue 20: twice in 10),
+    even when the budget forces drops.  The guard holds adds only; a drop the time left forces
+    is never delayed (the budget comes first).
 Cost
     Per item from ``item_costs`` (its expected rays times its learned rays ratio times the
     effect's learned ms per ray; Q = 1 is the measured cost, a designer's Q scales it), plus per
@@ -62,8 +70,7 @@ An aim on the frame time
     whose frames keep within uses more than the budget's nominal time left; one that overruns
     uses less; a frame that traced nothing and ended over anyway is not counted.  Ratios, no
     milliseconds: the same on a machine twice as fast.
-Choice
-    ``knapsack.solve_grouped`` within the time left (``solve_choices`` with tiers).
+Choice: ``knapsack.solve_grouped`` within the time left (``solve_choices`` with tiers).
 
 The constants were set on the training paths (arcade path1-2, atrium path1) only; the
 judged paths are arcade path3, atrium path2-3 and the showcase (docs/DESIGN.md).
@@ -71,11 +78,10 @@ judged paths are arcade path3, atrium path2-3 and the showcase (docs/DESIGN.md).
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
-
 import numpy as np
 
 from . import knapsack
+from .item_choice import ItemChoice
 from ..schema import EFFECTS
 
 SWITCH = 0.25
@@ -86,6 +92,9 @@ ADD_SLACK = 0.25
 # left's noise); an item dropped while it competed waits REST frames before it is added again.
 HOLD = 0.1
 REST = 4
+# An element not traced is taken again only FLIP_GAP frames after its last flip (see the guard):
+# three flips are then at least FLIP_GAP frames apart, none within a window of FLIP_GAP + 1.
+FLIP_GAP = 9
 # An item not traced last frame must fit (with ADD_SLACK) in the STEADY_QUANTILE-th percentile of
 # the time left over the last STEADY_FRAMES frames (this one included).
 STEADY_FRAMES = 8
@@ -121,37 +130,6 @@ AIM_RANGE = (0.5, 1.25)
 NO_ROOM = 1e12  # the add factor when the recent frames left no time at all
 
 
-@dataclass
-class ItemChoice:
-    """One frame's decision: per effect (``EFFECTS`` order) over elements."""
-
-    chosen: np.ndarray        # (n, 3) bool: the items traced
-    eligible: np.ndarray      # (n, 3) bool: the items that competed
-    value: np.ndarray         # (n, 3) expected error reduction (K included, no bonus)
-    cost_ms: np.ndarray       # (n, 3) predicted ms
-    per_pixel: np.ndarray     # (n, 3) the per-pixel estimate used
-    capacity_ms: float        # the time the knapsack filled (T less overhead, less the margin)
-    margin_ms: float
-    rate: np.ndarray = None   # (n, 3) the rate each item is traced at (0: not traced)
-    chosen_cost_ms: np.ndarray = None  # (n, 3) predicted ms of the chosen items at their rate
-    fixed_ms: float = 0.0     # the fixed parts of the effects chosen (paid once each)
-
-    @property
-    def rates(self) -> dict[str, np.ndarray]:
-        """Per effect name, each element's rate (``TraceStage.run(rates=...)``; 1.0 where not traced)."""
-        return {effect: np.where(self.rate[:, index] > 0, self.rate[:, index], 1.0)
-                for index, effect in enumerate(EFFECTS)}
-
-    @property
-    def effects(self) -> dict[str, np.ndarray]:
-        """Per effect name, the elements whose effect is traced (``TraceStage.run(effects=...)``)."""
-        return {effect: self.chosen[:, index] for index, effect in enumerate(EFFECTS)}
-
-    @property
-    def selected(self) -> np.ndarray:
-        return self.chosen.any(axis=1)
-
-
 class BenefitSelector:
     """What the BENEFIT selection keeps from frame to frame of a replay (by element name)."""
 
@@ -161,7 +139,8 @@ class BenefitSelector:
         self.waited: dict[tuple[str, str], int] = {}
         self.previous: set[tuple[str, str]] = set()
         self.dropped_at: dict[tuple[str, str], int] = {}  # item -> self.frames when it was last dropped
-        self.element_dropped_at: dict[str, int] = {}  # element -> self.frames when its last item was dropped
+        self.flipped_at: dict[str, int] = {}  # element -> self.frames of its last flip (in view both frames)
+        self.previous_visible: set[str] = set()  # the elements in view last frame
         self.recent_available = deque(maxlen=STEADY_FRAMES)  # the time left (less overhead) of recent frames
         self.previous_rate: dict[tuple[str, str], float] = {}
         self.prior_cache: dict[str, np.ndarray] = {}  # element name -> (3,) its last computed priors
@@ -196,7 +175,7 @@ class BenefitSelector:
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
-               tiers: bool = False, fixed_ms=None, unmeasured=None, tier_costs=None) -> ItemChoice:
+               tiers: bool = False, fixed_ms=None, unmeasured=None, tier_costs=None, visible=None) -> ItemChoice:
         """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
         ``cost_ms`` each item's predicted ms at full rate (``item_costs``, Q included);
         ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced;
@@ -204,8 +183,10 @@ class BenefitSelector:
         most valuable per predicted ms) is the probe, the others wait for its measurement.
         ``tiers``: each item may be bought at full, half or quarter rate (``TIER_RATES``), at
         ``tier_costs`` (n, 3, len(TIER_RATES)) ms (``item_costs.tier_costs``; None: the full cost
-        x ``TIER_COST``)."""
+        x ``TIER_COST``).  ``visible`` (n,) the elements in view (None: those with an eligible
+        item), for the guard on flips."""
         eligible = np.asarray(eligible, bool)
+        visible = eligible.any(axis=1) if visible is None else np.asarray(visible, bool).reshape(len(names))
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
         value = np.where(eligible, np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
@@ -242,42 +223,56 @@ class BenefitSelector:
                 was[i, j] = (name, effect) in self.previous
                 dropped = self.dropped_at.get((name, effect))
                 resting[i, j] = dropped is not None and self.frames - dropped < REST
-        # An element none of whose items is traced since it was dropped rests as a whole: a pop
-        # is the element's, whichever of its effects comes back.
-        element_resting = np.array([self.frames - self.element_dropped_at.get(name, -REST) < REST
-                                    for name in names], bool).reshape(len(names))
-        may_add = eligible & ~(~was & (resting | element_resting[:, None]))
+        # The guard on flips: an element none of whose items was traced last frame is taken again
+        # only FLIP_GAP frames after its last flip (whether it was in view last frame or not: one
+        # that left the view for a frame and came back may flip again once it is back).
+        guarded = np.array([self.frames - self.flipped_at.get(name, -FLIP_GAP) < FLIP_GAP for name in names],
+                           bool).reshape(len(names)) & ~was.any(axis=1)
+        may_add = eligible & ~(~was & resting) & ~guarded[:, None]
         held = was.any(axis=0)  # the effects whose fixed part was paid last frame
         charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * peak)
         switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
         waited = np.array([[self.waited.get((name, effect), 0) for effect in EFFECTS] for name in names],
                           np.float64).reshape(eligible.shape)
-        explore = may_add & fresh & (cost * add_factor <= capacity)
-        bonus = np.zeros(eligible.shape)
-        if np.any(explore):
-            total = float(switched[eligible].sum()) + 1e-12
-            bonus[explore] = total * np.minimum((waited[explore] + 1) / EXPLORE_FRAMES, 1.0)
-        rate = np.zeros(eligible.shape)
         if tier_costs is None:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
         tier_costs = np.clip(np.nan_to_num(np.asarray(tier_costs, np.float64), nan=np.inf), 0.0, np.inf)
-        if tiers:
-            rate = self._choose_rates(names, may_add, value, bonus, was, tier_costs, capacity, charged_fixed,
-                                      add_factor)
-            chosen = rate > 0
-        else:
-            charged = np.where(was, cost * (1.0 - HOLD), cost * add_factor)
-            flat = knapsack.solve_grouped(np.where(may_add, switched + bonus, 0.0).ravel(),
-                                          np.where(may_add, charged, np.inf).ravel(),
-                                          np.tile(np.arange(len(EFFECTS)), len(eligible)), charged_fixed, capacity)
-            chosen = flat.reshape(eligible.shape) & may_add
-            rate[chosen] = 1.0
+        charged = np.where(was, cost * (1.0 - HOLD), cost * add_factor)
+
+        def fill(allowed, bonus, room, fixed_due):
+            """(n, 3) rates of the best items among ``allowed`` within ``room``."""
+            if tiers:
+                return self._choose_rates(names, allowed, value, bonus, was, tier_costs, room, fixed_due,
+                                          add_factor)
+            flat = knapsack.solve_grouped(np.where(allowed, switched + bonus, 0.0).ravel(),
+                                          np.where(allowed, charged, np.inf).ravel(),
+                                          np.tile(np.arange(len(EFFECTS)), len(eligible)), fixed_due, room)
+            return np.where(flat.reshape(eligible.shape) & allowed, 1.0, 0.0)
+
+        rate = fill(may_add, np.zeros(eligible.shape), capacity, charged_fixed)
+        # Exploration competes only for the time the items kept from last frame leave: a never
+        # measured item may displace this frame's adds, never a traced item (on arcade path1 at 0.75
+        # one glass ball's first trace evicted seven traced elements at once: seven pops).
+        kept = (rate > 0) & was
+        option = np.searchsorted(-np.asarray(TIER_RATES), -rate)  # each kept item's tier (full: 0)
+        kept_cost = np.take_along_axis(tier_costs, np.minimum(option, len(TIER_RATES) - 1)[:, :, None],
+                                       axis=2)[:, :, 0] if tiers else charged  # tiers: at most their cost
+        paid = kept.any(axis=0)
+        room = capacity - float(np.sum(kept_cost[kept])) - float(np.sum(charged_fixed[paid]))
+        explore = may_add & ~kept & fresh & (cost * add_factor <= room)
+        if np.any(explore):
+            bonus = np.zeros(eligible.shape)
+            total = float(switched[eligible].sum()) + 1e-12
+            bonus[explore] = total * np.minimum((waited[explore] + 1) / EXPLORE_FRAMES, 1.0)
+            added = fill(may_add & ~kept, bonus, room, np.where(paid, 0.0, charged_fixed))
+            rate = np.where(kept, rate, added)
+        chosen = rate > 0
         spent = np.zeros(eligible.shape)
         for option, tier in enumerate(TIER_RATES):
             spent = np.where(chosen & (rate == tier), tier_costs[:, :, option], spent)
         return ItemChoice(chosen=chosen, eligible=eligible, value=value, cost_ms=np.where(eligible, cost, 0.0),
                           per_pixel=per_pixel, capacity_ms=capacity, margin_ms=margin, rate=rate,
-                          chosen_cost_ms=spent, fixed_ms=float(fixed[chosen.any(axis=0)].sum()))
+                          chosen_cost_ms=spent, fixed_ms=float(fixed[chosen.any(axis=0)].sum()), visible=visible)
 
     def keep(self, effect: str, tier: float) -> float:
         """The share of an item's full-rate benefit a rate keeps: learned per effect and rate from
@@ -320,8 +315,13 @@ class BenefitSelector:
         for i, j in zip(*np.nonzero(choice.eligible & ~chosen)):
             if (names[i], EFFECTS[j]) in self.previous:
                 self.dropped_at[(names[i], EFFECTS[j])] = self.frames
-                if not chosen[i].any():
-                    self.element_dropped_at[names[i]] = self.frames
+        # The elements' flips (the guard): traced state changed, in view on both frames.
+        visible = choice.eligible.any(axis=1) if choice.visible is None else np.asarray(choice.visible, bool)
+        traced_before = {name for name, _ in self.previous}
+        for i in np.flatnonzero(visible):
+            if names[i] in self.previous_visible and bool(chosen[i].any()) != (names[i] in traced_before):
+                self.flipped_at[names[i]] = self.frames
+        self.previous_visible = {names[i] for i in np.flatnonzero(visible)}
         self.previous = {(names[i], EFFECTS[j]) for i, j in zip(*np.nonzero(chosen))}
         self.previous_rate = {(names[i], EFFECTS[j]): float(choice.rate[i, j]) for i, j in zip(*np.nonzero(chosen))}
         for i, name in enumerate(names):
