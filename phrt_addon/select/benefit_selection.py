@@ -49,27 +49,9 @@ Cost
     Per item from ``item_costs`` (its expected rays times its learned rays ratio times the
     effect's learned ms per ray; Q = 1 is the measured cost, a designer's Q scales it), plus per
     effect a fixed part paid once if any of its items is traced (``knapsack.solve_grouped``);
-    the trace stage's fixed overhead is charged once; the time left is reduced by
-    a margin, the 80th percentile of (measured - predicted) trace ms over the traced frames among
-    the last ``MARGIN_FRAMES`` frames whose prediction was informed (the fixed overhead and every
-    chosen effect measured before; the median below ``MARGIN_MIN_SAMPLES`` such frames; none
-    without: an effect never measured is charged 1.5x its prior; within -half..half of the
-    time left): a prediction found too low is not
-    believed again after a few cheap frames, one found too high lets the time be filled.  The
-    margin is additive (the trace stage's fixed work per light and layer is what the per-item
-    costs miss, whatever is chosen), and it ages by frames, so a frame that traces nothing
-    cannot freeze it.
-An aim on the frame time
-    What the time left cannot see (the raster half's and the composite's own noise, the trace
-    stage's spread around its prediction) makes frames of fixed work swing: a raster-only or
-    a fully ray traced replay's p95 is 1.24-1.41x its median (arcade, atrium path1, showcase,
-    320x240).  The knapsack fills ``aim`` x the budget, less the stages' predictions; ``aim``
-    tracks, by stochastic approximation (Robbins-Monro), the share of frames that end over
-    ``AIM_OVER`` x the budget, towards ``AIM_SHARE``: each frame over lowers log(aim) by
-    ``AIM_STEP`` x (1 - AIM_SHARE), each frame within raises it by AIM_STEP x AIM_SHARE.  A run
-    whose frames keep within uses more than the budget's nominal time left; one that overruns
-    uses less; a frame that traced nothing and ended over anyway is not counted.  Ratios, no
-    milliseconds: the same on a machine twice as fast.
+    the trace stage's fixed overhead is charged once; the time left is reduced by the margin
+    and planned to the aim of ``frame_time.FrameTime`` (the predictions' recent errors, the
+    share of frames over budget).
 Choice: ``knapsack.solve_grouped`` within the time left (``solve_choices`` with tiers).
 
 The constants were set on the training paths (arcade path1-2, atrium path1) only; the
@@ -77,10 +59,11 @@ judged paths are arcade path3, atrium path2-3 and the showcase (docs/DESIGN.md).
 """
 from __future__ import annotations
 
-from collections import deque
 import numpy as np
 
 from . import knapsack
+from .frame_time import (AIM_OVER, AIM_RANGE, AIM_SHARE, AIM_STEP, MARGIN_FRAMES, STEADY_FRAMES,  # noqa: F401
+                         STEADY_QUANTILE, FrameTime)
 from .item_choice import ItemChoice
 from ..schema import EFFECTS
 
@@ -95,10 +78,6 @@ REST = 4
 # An element not traced is taken again only FLIP_GAP frames after its last flip (see the guard):
 # three flips are then at least FLIP_GAP frames apart, none within a window of FLIP_GAP + 1.
 FLIP_GAP = 9
-# An item not traced last frame must fit (with ADD_SLACK) in the STEADY_QUANTILE-th percentile of
-# the time left over the last STEADY_FRAMES frames (this one included).
-STEADY_FRAMES = 8
-STEADY_QUANTILE = 25
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
@@ -111,9 +90,6 @@ TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
 TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
 KEEP_SMOOTHING = 0.1
 KEEP_RANGE = (0.25, 1.0)  # a share learned near 0 would never be tried again
-MARGIN_FRAMES = 20
-MARGIN_QUANTILE = 80
-MARGIN_MIN_SAMPLES = 5
 # Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
 # on any frame that traces an item never measured.
 MEASURE_EVERY = 2
@@ -121,13 +97,12 @@ MEASURE_EVERY = 2
 # frames, and on any frame with a visible candidate that has none yet.
 PRIOR_EVERY = 8
 MAX_VALUE = 1e15
-# The aim (see the module docstring): p95 frame time at AIM_OVER x the budget, half the issue's
-# 1.10 allowance (a run of 200 frames estimates a 5% share within about +-1.5%).
-AIM_SHARE = 0.05
-AIM_OVER = 1.05
-AIM_STEP = 0.05
-AIM_RANGE = (0.5, 1.25)
 NO_ROOM = 1e12  # the add factor when the recent frames left no time at all
+
+
+def _item_keys(names) -> list:
+    """The (name, effect) keys of the (n, 3) item arrays, row by row."""
+    return [(name, effect) for name in names for effect in EFFECTS]
 
 
 class BenefitSelector:
@@ -141,37 +116,25 @@ class BenefitSelector:
         self.dropped_at: dict[tuple[str, str], int] = {}  # item -> self.frames when it was last dropped
         self.flipped_at: dict[str, int] = {}  # element -> self.frames of its last flip (in view both frames)
         self.previous_visible: set[str] = set()  # the elements in view last frame
-        self.recent_available = deque(maxlen=STEADY_FRAMES)  # the time left (less overhead) of recent frames
         self.previous_rate: dict[tuple[str, str], float] = {}
         self.prior_cache: dict[str, np.ndarray] = {}  # element name -> (3,) its last computed priors
         self.priors_at = None  # self.frames when the priors were last computed
-        self.errors: deque = deque(maxlen=MARGIN_FRAMES)  # (frame count, measured - predicted ms)
         self.kept: dict[tuple[str, float], float] = {}  # (effect, rate) -> learned share of the benefit
         self.measured_at: dict[tuple[str, str], float] = {}  # item -> the rate of its last measurement
         self.frames = 0
-        self.log_aim = 0.0  # log of the share of the budget the frame is planned to (see the aim)
+        self.time = FrameTime()  # the margin, the steady time left, the aim
 
     # -- the decision ------------------------------------------------------------
     def margin_ms(self, available_ms: float) -> float:
-        """What the time left loses to the predictions' recent errors (see the module docstring)."""
-        recent = [error for frame, error in self.errors if frame > self.frames - MARGIN_FRAMES]
-        if not recent:  # nothing measured lately: the cost model's own priors (margined) stand
-            return 0.0
-        # Few samples: their median (an 80th percentile of two is their maximum, one outlier
-        # would hold the time left for MARGIN_FRAMES frames); never more than half the time left.
-        quantile = MARGIN_QUANTILE if len(recent) >= MARGIN_MIN_SAMPLES else 50
-        return float(np.clip(np.percentile(np.asarray(recent), quantile), -0.5 * available_ms, 0.5 * available_ms))
+        return self.time.margin_ms(available_ms, self.frames)
 
     def per_pixel(self, names, priors: np.ndarray, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) learned estimates (prior where never measured) and (n, 3) never-measured flags."""
-        estimate = np.array(priors, np.float64, copy=True)
-        fresh = np.ones_like(eligible, dtype=bool)
-        for i, name in enumerate(names):
-            for j, effect in enumerate(EFFECTS):
-                value = self.estimates.get((name, effect))
-                if value is not None:
-                    estimate[i, j] = value
-                    fresh[i, j] = False
+        shape = np.shape(eligible)
+        learned = np.fromiter((self.estimates.get(key, np.nan) for key in _item_keys(names)), np.float64,
+                              count=shape[0] * len(EFFECTS)).reshape(shape)
+        fresh = np.isnan(learned)
+        estimate = np.where(fresh, np.asarray(priors, np.float64).reshape(shape), learned)
         return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
@@ -198,8 +161,7 @@ class BenefitSelector:
         # Adds are sized for the time left the recent frames could be counted on (STEADY_QUANTILE
         # of the last STEADY_FRAMES), not for this frame's peak: an item added on a frame of
         # uncommon room would be dropped again on the next ordinary one.
-        self.recent_available.append(available)
-        steady = float(np.percentile(np.asarray(self.recent_available), STEADY_QUANTILE))
+        steady = self.time.steady_ms(available)
         # How much this frame's time exceeds the steady one; no steady time at all: nothing new is
         # added (a finite factor, so a 0 ms cost stays a number).
         peak = available / steady if 0.0 < steady < available else (1.0 if steady > 0.0 else NO_ROOM)
@@ -216,13 +178,12 @@ class BenefitSelector:
                 eligible = eligible.copy()
                 eligible[:, j] &= probe
 
-        was = np.zeros_like(eligible)
-        resting = np.zeros_like(eligible)
-        for i, name in enumerate(names):
-            for j, effect in enumerate(EFFECTS):
-                was[i, j] = (name, effect) in self.previous
-                dropped = self.dropped_at.get((name, effect))
-                resting[i, j] = dropped is not None and self.frames - dropped < REST
+        keys = _item_keys(names)
+        count = eligible.size
+        was = np.fromiter((key in self.previous for key in keys), bool, count=count).reshape(eligible.shape)
+        dropped = np.fromiter((self.dropped_at.get(key, -REST) for key in keys), np.float64,
+                              count=count).reshape(eligible.shape)
+        resting = self.frames - dropped < REST
         # The guard on flips: an element none of whose items was traced last frame is taken again
         # only FLIP_GAP frames after its last flip (whether it was in view last frame or not: one
         # that left the view for a frame and came back may flip again once it is back).
@@ -232,8 +193,8 @@ class BenefitSelector:
         held = was.any(axis=0)  # the effects whose fixed part was paid last frame
         charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * peak)
         switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
-        waited = np.array([[self.waited.get((name, effect), 0) for effect in EFFECTS] for name in names],
-                          np.float64).reshape(eligible.shape)
+        waited = np.fromiter((self.waited.get(key, 0) for key in keys), np.float64,
+                             count=count).reshape(eligible.shape)
         if tier_costs is None:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
         tier_costs = np.clip(np.nan_to_num(np.asarray(tier_costs, np.float64), nan=np.inf), 0.0, np.inf)
@@ -324,31 +285,29 @@ class BenefitSelector:
         self.previous_visible = {names[i] for i in np.flatnonzero(visible)}
         self.previous = {(names[i], EFFECTS[j]) for i, j in zip(*np.nonzero(chosen))}
         self.previous_rate = {(names[i], EFFECTS[j]): float(choice.rate[i, j]) for i, j in zip(*np.nonzero(chosen))}
-        for i, name in enumerate(names):
-            for j, effect in enumerate(EFFECTS):
-                key = (name, effect)
-                if not choice.eligible[i, j]:
-                    continue
-                if chosen[i, j] and measured is not None and pixels is not None and pixels[i, j] > 0:
-                    tier = float(choice.rate[i, j]) if choice.rate is not None else 1.0
-                    seen = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j]), 0.0, MAX_VALUE))
-                    old = self.estimates.get(key)
-                    if tier < 1.0 and old is not None and old > 0 and self.measured_at.get(key) == 1.0:
-                        # Measured at a reduced rate right after a full-rate measurement: the share kept.
-                        share = float(np.clip(seen / old, KEEP_RANGE[0], KEEP_RANGE[1]))
-                        before = self.keep(effect, tier)
-                        self.kept[(effect, tier)] = before + KEEP_SMOOTHING * (share - before)
-                    self.measured_at[key] = tier
-                    # What a reduced rate changed, as the full rate's estimate (over its kept share).
-                    value = float(np.clip(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0, MAX_VALUE))
-                    self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
-                    self.observations[key] = self.observations.get(key, 0) + 1
-                    self.waited.pop(key, None)
-                elif key in self.estimates:  # visible, not traced: the view moved on since
-                    prior = float(np.nan_to_num(priors[i, j]))
-                    self.estimates[key] += DECAY * (prior - self.estimates[key])
-                else:
-                    self.waited[key] = self.waited.get(key, 0) + 1
+        for i, j in zip(*np.nonzero(choice.eligible)):
+            effect = EFFECTS[j]
+            key = (names[i], effect)
+            if chosen[i, j] and measured is not None and pixels is not None and pixels[i, j] > 0:
+                tier = float(choice.rate[i, j]) if choice.rate is not None else 1.0
+                seen = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j]), 0.0, MAX_VALUE))
+                old = self.estimates.get(key)
+                if tier < 1.0 and old is not None and old > 0 and self.measured_at.get(key) == 1.0:
+                    # Measured at a reduced rate right after a full-rate measurement: the share kept.
+                    share = float(np.clip(seen / old, KEEP_RANGE[0], KEEP_RANGE[1]))
+                    before = self.keep(effect, tier)
+                    self.kept[(effect, tier)] = before + KEEP_SMOOTHING * (share - before)
+                self.measured_at[key] = tier
+                # What a reduced rate changed, as the full rate's estimate (over its kept share).
+                value = float(np.clip(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0, MAX_VALUE))
+                self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
+                self.observations[key] = self.observations.get(key, 0) + 1
+                self.waited.pop(key, None)
+            elif key in self.estimates:  # visible, not traced: the view moved on since
+                prior = float(np.nan_to_num(priors[i, j]))
+                self.estimates[key] += DECAY * (prior - self.estimates[key])
+            else:
+                self.waited[key] = self.waited.get(key, 0) + 1
 
     def needs_priors(self, names, visible_candidates) -> bool:
         """Whether this frame must compute the material priors (read the layers before the
@@ -374,27 +333,13 @@ class BenefitSelector:
 
     @property
     def aim(self) -> float:
-        return float(np.exp(self.log_aim))
+        return self.time.aim
 
     def aimed_time_left(self, time_left_ms: float, budget_ms: float) -> float:
-        """The time left for the knapsack when the frame is planned to ``aim`` x the budget."""
-        budget = float(np.nan_to_num(budget_ms, nan=0.0, posinf=0.0, neginf=0.0))
-        return max(float(time_left_ms) + (self.aim - 1.0) * max(budget, 0.0), 0.0)
+        return self.time.aimed_time_left(time_left_ms, budget_ms)
 
     def observe_frame(self, total_ms: float, budget_ms: float, traced: bool = True) -> None:
-        """A steady frame's measured time against its budget: the aim's update.  A frame that
-        traced nothing and still ended over (the raster half alone) says nothing of the aim:
-        not counted, so a budget the raster half overruns does not shut tracing on the frames it
-        leaves room in."""
-        if not (np.isfinite(total_ms) and np.isfinite(budget_ms) and budget_ms > 0 and total_ms >= 0):
-            return
-        over = float(total_ms > AIM_OVER * budget_ms)
-        if over and not traced:
-            return
-        self.log_aim = float(np.clip(self.log_aim + AIM_STEP * (AIM_SHARE - over),
-                                     np.log(AIM_RANGE[0]), np.log(AIM_RANGE[1])))
+        self.time.observe_frame(total_ms, budget_ms, traced)
 
     def observe_time(self, predicted_ms: float, measured_ms: float) -> None:
-        """A traced frame's predicted and measured trace time (the margin's sample)."""
-        if np.isfinite(predicted_ms) and np.isfinite(measured_ms) and measured_ms >= 0:
-            self.errors.append((self.frames, float(measured_ms) - float(predicted_ms)))
+        self.time.observe_time(predicted_ms, measured_ms, self.frames)

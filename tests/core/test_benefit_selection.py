@@ -478,3 +478,12 @@ def test_a_frame_over_budget_that_traced_nothing_does_not_lower_the_aim():
     before = selector.aim
     selector.observe_frame(50.0, 100.0, traced=False)  # room left, nothing bought: the aim may rise
     assert selector.aim > before
+
+
+def test_the_short_percentile_is_numpys():
+    from phrt.phrt_addon.select import frame_time
+    rng = np.random.default_rng(3)
+    for size in (1, 2, 3, 8, 20):
+        values = rng.normal(0.0, 10.0, size)
+        for q in (0, 25, 50, 80, 100):
+            assert frame_time.percentile(values, q) == pytest.approx(float(np.percentile(values, q)), abs=1e-12)
