@@ -56,7 +56,9 @@ faults: $(STAMP)
 # The selections judged on the held-out paths (issue 20): sweeps at 320x240, budgets 0.1-0.9 of the
 # way, the oracle every 4th frame, variants measured, error, benefit; one table of captured share
 # (90% interval), pops / 100 frames and p95 / budget in out/selection-eval/selection_eval.{csv,md}.
-# LONG (hours at the default 240 frames per path); resumes.  A short one:
+# LONG (hours at the default 240 frames per path); resumes.  It keeps every frame of every run
+# as EXR: about 11 GB of disk at 200 frames a path (the report is scored from them; delete the
+# runs' frames/ folders once the table is written if the disk is small).  A short one:
 # `make selection-eval EVAL_FRAMES=1-48 EVAL_PATHS=arcade/path3`.
 EVAL_FRAMES ?= 1-240
 EVAL_PATHS ?= arcade/path3,atrium/path2,atrium/path3,showcase/orbit
