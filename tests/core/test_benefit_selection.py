@@ -7,6 +7,7 @@ import pytest
 
 from phrt.phrt_addon.select import benefit_selection
 from phrt.phrt_addon.select.benefit_selection import BenefitSelector
+from phrt.phrt_addon.runs import summary as run_summary
 from phrt.phrt_addon.scene.snapshot import Element
 
 from test_frame import mirror_scene, render
@@ -382,19 +383,13 @@ def test_an_element_dropped_whole_waits_the_flip_gap_whichever_of_its_effects_wo
     assert states == [False] * (benefit_selection.FLIP_GAP - 1) + [True], states
 
 
-def _flips_in_windows(states, window=10):
-    """The most changes of a list of booleans between ``window`` consecutive frames."""
-    flips = [k for k in range(1, len(states)) if states[k] != states[k - 1]]
-    return max((sum(1 for f in flips if start < f <= start + window - 1) for start in range(len(states))),
-               default=0)
-
-
 @pytest.mark.parametrize("seed", range(6))
 def test_no_element_flips_more_than_twice_in_10_frames_whatever_the_time_left_does(seed):
     """Three elements compete for a time left that jumps at random between none and all of
     them (the worst the raster half's noise can do): each may be dropped on any frame the
-    budget forces it, yet none flips more than twice within any 10 frames; and they are traced
-    (the guard holds adds back, it does not shut tracing)."""
+    budget forces it, yet none flips more than twice within any 10 frames as the reports count
+    flips (``runs.summary.max_flips_in_window``); and they are traced (the guard holds adds
+    back, it does not shut tracing)."""
     rng = np.random.default_rng(seed)
     selector = BenefitSelector()
     names = ["A", "B", "C"]
@@ -402,15 +397,15 @@ def test_no_element_flips_more_than_twice_in_10_frames_whatever_the_time_left_do
     priors = np.asarray([[0, 0.1, 0], [0, 0.08, 0], [0, 0.05, 0]], float)
     for name, value in zip(names, priors[:, 1]):
         selector.estimates[(name, "reflections")] = float(value)
-    states = {name: [] for name in names}
-    for _ in range(300):
+    states, rows = {name: [] for name in names}, []
+    for frame in range(300):
         choice = choose(selector, names, pixels, priors, [[0, 6, 0], [0, 5, 0], [0, 4, 0]],
                         float(rng.choice([0.0, 5.0, 9.0, 16.0, 30.0])))
         selector.observe(names, choice, priors)
         for i, name in enumerate(names):
             states[name].append(bool(choice.chosen[i].any()))
-    assert max(_flips_in_windows(states[name]) for name in names) <= 2, \
-        {name: _flips_in_windows(s) for name, s in states.items()}
+            rows.append({"frame": frame, "element": name, "selected": states[name][-1], "visible": True})
+    assert run_summary.max_flips_in_window(rows, 10) <= 2
     assert all(sum(s) >= 15 for s in states.values()), {name: sum(s) for name, s in states.items()}
 
 
