@@ -59,6 +59,8 @@ judged paths are arcade path3, atrium path2-3 and the showcase (docs/DESIGN.md).
 """
 from __future__ import annotations
 
+from itertools import repeat
+
 import numpy as np
 
 from . import knapsack
@@ -124,6 +126,14 @@ class BenefitSelector:
         self.frames = 0
         self.time = FrameTime()  # the margin, the steady time left, the aim
 
+    def _keys(self, names) -> list:
+        """:func:`_item_keys`, kept while the element names stay those of the last frame."""
+        cached = self.__dict__.get("_names_keys")
+        if cached is None or cached[0] != list(names):
+            cached = (list(names), _item_keys(names))
+            self._names_keys = cached
+        return cached[1]
+
     # -- the decision ------------------------------------------------------------
     def margin_ms(self, available_ms: float) -> float:
         return self.time.margin_ms(available_ms, self.frames)
@@ -131,7 +141,7 @@ class BenefitSelector:
     def per_pixel(self, names, priors: np.ndarray, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) learned estimates (prior where never measured) and (n, 3) never-measured flags."""
         shape = np.shape(eligible)
-        learned = np.fromiter((self.estimates.get(key, np.nan) for key in _item_keys(names)), np.float64,
+        learned = np.fromiter(map(self.estimates.get, self._keys(names), repeat(np.nan)), np.float64,
                               count=shape[0] * len(EFFECTS)).reshape(shape)
         fresh = np.isnan(learned)
         estimate = np.where(fresh, np.asarray(priors, np.float64).reshape(shape), learned)
@@ -178,22 +188,22 @@ class BenefitSelector:
                 eligible = eligible.copy()
                 eligible[:, j] &= probe
 
-        keys = _item_keys(names)
+        keys = self._keys(names)
         count = eligible.size
-        was = np.fromiter((key in self.previous for key in keys), bool, count=count).reshape(eligible.shape)
-        dropped = np.fromiter((self.dropped_at.get(key, -REST) for key in keys), np.float64,
+        was = np.fromiter(map(self.previous.__contains__, keys), bool, count=count).reshape(eligible.shape)
+        dropped = np.fromiter(map(self.dropped_at.get, keys, repeat(-REST)), np.float64,
                               count=count).reshape(eligible.shape)
         resting = self.frames - dropped < REST
         # The guard on flips: an element none of whose items was traced last frame is taken again
         # only FLIP_GAP frames after its last flip (whether it was in view last frame or not: one
         # that left the view for a frame and came back may flip again once it is back).
-        guarded = np.array([self.frames - self.flipped_at.get(name, -FLIP_GAP) < FLIP_GAP for name in names],
-                           bool).reshape(len(names)) & ~was.any(axis=1)
+        flipped = np.fromiter(map(self.flipped_at.get, names, repeat(-FLIP_GAP)), np.float64, count=len(names))
+        guarded = (self.frames - flipped < FLIP_GAP) & ~was.any(axis=1)
         may_add = eligible & ~(~was & resting) & ~guarded[:, None]
         held = was.any(axis=0)  # the effects whose fixed part was paid last frame
         charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * peak)
         switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
-        waited = np.fromiter((self.waited.get(key, 0) for key in keys), np.float64,
+        waited = np.fromiter(map(self.waited.get, keys, repeat(0)), np.float64,
                              count=count).reshape(eligible.shape)
         if tier_costs is None:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
@@ -247,67 +257,81 @@ class BenefitSelector:
         effect's ``fixed`` part paid once if any of its items is traced; the switching cost counts
         a change of rate like a change of state; shadows only at full rate."""
         items = np.argwhere(eligible)
-        n_options = len(TIER_RATES)
-        values = np.zeros((len(items), n_options))
-        costs = np.full((len(items), n_options), np.inf)
-        for row, (i, j) in enumerate(items.tolist()):
-            before = self.previous_rate.get((names[i], EFFECTS[j]), 0.0)
-            for option, tier in enumerate(TIER_RATES):
-                if EFFECTS[j] == "shadows" and tier < 1.0:
-                    continue
-                same = was[i, j] and before == tier
-                factor = (1.0 + SWITCH) if same else (1.0 if was[i, j] else 1.0 - SWITCH)
-                values[row, option] = value[i, j] * self.keep(EFFECTS[j], tier) * factor + bonus[i, j]
-                costs[row, option] = tier_costs[i, j, option] * \
-                    ((1.0 - HOLD) if same else (1.0 if was[i, j] else add_factor))
-        picked = knapsack.solve_choices(values, costs, capacity, groups=items[:, 1], group_costs=fixed)
+        rows, effects = items[:, 0], items[:, 1]
+        tiers = np.asarray(TIER_RATES, np.float64)
+        before = np.fromiter(map(self.previous_rate.get, [(names[i], EFFECTS[j]) for i, j in items.tolist()],
+                                 repeat(0.0)), np.float64, count=len(items))
+        kept = was[rows, effects][:, None]
+        same = kept & (before[:, None] == tiers[None, :])
+        factor = np.where(same, 1.0 + SWITCH, np.where(kept, 1.0, 1.0 - SWITCH))
+        shares = np.array([[self.keep(effect, tier) for tier in TIER_RATES] for effect in EFFECTS])
+        values = value[rows, effects][:, None] * shares[effects] * factor + bonus[rows, effects][:, None]
+        costs = tier_costs[rows, effects, :] * np.where(same, 1.0 - HOLD, np.where(kept, 1.0, add_factor))
+        reduced_shadow = (effects == EFFECTS.index("shadows"))[:, None] & (tiers < 1.0)[None, :]  # full rate only
+        values[reduced_shadow], costs[reduced_shadow] = 0.0, np.inf
+        picked = knapsack.solve_choices(values, costs, capacity, groups=effects, group_costs=fixed)
         rate = np.zeros(eligible.shape)
-        for row, option in enumerate(picked.tolist()):
-            if option >= 0:
-                rate[tuple(items[row])] = TIER_RATES[option]
+        traced = picked >= 0
+        rate[rows[traced], effects[traced]] = tiers[picked[traced]]
         return rate
 
     # -- learning ------------------------------------------------------------------
     def observe(self, names, choice: ItemChoice, priors, measured=None, pixels=None) -> None:
         """After the frame: ``measured`` (n, 3) summed differences per item where traced (None:
         not measured), ``pixels`` (n, 3) the pixels each item covers (its divisor)."""
-        chosen = choice.chosen
+        chosen = np.asarray(choice.chosen, bool)
+        eligible = np.asarray(choice.eligible, bool)
+        keys = self._keys(names)
+        was = np.fromiter(map(self.previous.__contains__, keys), bool, count=len(keys)).reshape(eligible.shape)
         # Dropped while it competed (not for leaving the view): it rests (REST).
-        for i, j in zip(*np.nonzero(choice.eligible & ~chosen)):
-            if (names[i], EFFECTS[j]) in self.previous:
-                self.dropped_at[(names[i], EFFECTS[j])] = self.frames
+        self.dropped_at.update((keys[k], self.frames) for k in np.flatnonzero((eligible & ~chosen & was).ravel()))
         # The elements' flips (the guard): traced state changed, in view on both frames.
-        visible = choice.eligible.any(axis=1) if choice.visible is None else np.asarray(choice.visible, bool)
+        visible = eligible.any(axis=1) if choice.visible is None else np.asarray(choice.visible, bool)
         traced_before = {name for name, _ in self.previous}
         for i in np.flatnonzero(visible):
             if names[i] in self.previous_visible and bool(chosen[i].any()) != (names[i] in traced_before):
                 self.flipped_at[names[i]] = self.frames
         self.previous_visible = {names[i] for i in np.flatnonzero(visible)}
-        self.previous = {(names[i], EFFECTS[j]) for i, j in zip(*np.nonzero(chosen))}
-        self.previous_rate = {(names[i], EFFECTS[j]): float(choice.rate[i, j]) for i, j in zip(*np.nonzero(chosen))}
-        for i, j in zip(*np.nonzero(choice.eligible)):
-            effect = EFFECTS[j]
-            key = (names[i], effect)
-            if chosen[i, j] and measured is not None and pixels is not None and pixels[i, j] > 0:
-                tier = float(choice.rate[i, j]) if choice.rate is not None else 1.0
-                seen = float(np.clip(np.nan_to_num(measured[i, j] / pixels[i, j]), 0.0, MAX_VALUE))
-                old = self.estimates.get(key)
-                if tier < 1.0 and old is not None and old > 0 and self.measured_at.get(key) == 1.0:
-                    # Measured at a reduced rate right after a full-rate measurement: the share kept.
-                    share = float(np.clip(seen / old, KEEP_RANGE[0], KEEP_RANGE[1]))
-                    before = self.keep(effect, tier)
-                    self.kept[(effect, tier)] = before + KEEP_SMOOTHING * (share - before)
-                self.measured_at[key] = tier
-                # What a reduced rate changed, as the full rate's estimate (over its kept share).
-                value = float(np.clip(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0, MAX_VALUE))
-                self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
-                self.observations[key] = self.observations.get(key, 0) + 1
-                self.waited.pop(key, None)
-            elif key in self.estimates:  # visible, not traced: the view moved on since
-                prior = float(np.nan_to_num(priors[i, j]))
-                self.estimates[key] += DECAY * (prior - self.estimates[key])
-            else:
-                self.waited[key] = self.waited.get(key, 0) + 1
+        traced = np.flatnonzero(chosen.ravel())
+        self.previous = {keys[k] for k in traced}
+        rates = np.ones(len(keys)) if choice.rate is None else np.asarray(choice.rate, np.float64).ravel()
+        self.previous_rate = {keys[k]: float(rates[k]) for k in traced}
+        # Per eligible item: measured (traced, with a measurement), else decayed towards its prior
+        # (it has an estimate: the view moved on since), else one more frame waited.
+        if measured is not None and pixels is not None:
+            pixels = np.asarray(pixels, np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                seen_all = np.clip(np.nan_to_num(np.asarray(measured, np.float64) / pixels), 0.0, MAX_VALUE)
+            measuring = eligible & chosen & (pixels > 0)
+        else:
+            seen_all, measuring = None, np.zeros(eligible.shape, bool)
+        rest = np.flatnonzero((eligible & ~measuring).ravel())
+        rest_keys = [keys[k] for k in rest]
+        known = np.fromiter(map(self.estimates.__contains__, rest_keys), bool, count=len(rest_keys))
+        decaying = [key for key, flag in zip(rest_keys, known.tolist()) if flag]
+        if decaying:
+            estimate = np.fromiter(map(self.estimates.__getitem__, decaying), np.float64, count=len(decaying))
+            prior = np.nan_to_num(np.asarray(priors, np.float64).ravel()[rest[known]])
+            self.estimates.update(zip(decaying, (estimate + DECAY * (prior - estimate)).tolist()))
+        for key in (key for key, flag in zip(rest_keys, known.tolist()) if not flag):
+            self.waited[key] = self.waited.get(key, 0) + 1
+        for k in np.flatnonzero(measuring.ravel()).tolist():
+            key = keys[k]
+            effect = key[1]
+            tier = float(rates[k])
+            seen = float(seen_all.ravel()[k])
+            old = self.estimates.get(key)
+            if tier < 1.0 and old is not None and old > 0 and self.measured_at.get(key) == 1.0:
+                # Measured at a reduced rate right after a full-rate measurement: the share kept.
+                share = float(np.clip(seen / old, KEEP_RANGE[0], KEEP_RANGE[1]))
+                before = self.keep(effect, tier)
+                self.kept[(effect, tier)] = before + KEEP_SMOOTHING * (share - before)
+            self.measured_at[key] = tier
+            # What a reduced rate changed, as the full rate's estimate (over its kept share).
+            value = float(np.clip(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0, MAX_VALUE))
+            self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
+            self.observations[key] = self.observations.get(key, 0) + 1
+            self.waited.pop(key, None)
 
     def needs_priors(self, names, visible_candidates) -> bool:
         """Whether this frame must compute the material priors (read the layers before the

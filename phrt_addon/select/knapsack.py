@@ -13,16 +13,24 @@ the loss of the rounding on a set of few large items: the returned value is at l
 of the optimum.
 
 Items of value <= 0, or that cannot fit alone, are never chosen; items of cost 0 and value
-> 0 always are.  Plain numpy: the programme is one vectorised row update per item.
+> 0 always are.  Plain numpy: the programme is one row of three vectorised calls per item.
+From ``REDUCE_FROM`` items on, :mod:`knapsack_bounds` first fixes the items every optimum takes
+or leaves (a Lagrangian bound against a greedy's value), and the programme runs over the rest
+only: the same choice (for the same rounded costs), at a fraction of the programme's rows.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from . import knapsack_bounds
+
 DEFAULT_BINS = 256
 EXACT_LIMIT = 1000
 CORE_ITEMS = 96
 MAX_BINS = 4096
+# Items from which the bound's reduction runs first (knapsack_bounds): below it the programme
+# over every item costs less than the bound (about 0.2 ms of numpy calls either way).
+REDUCE_FROM = 48
 
 
 LARGE = np.finfo(np.float64).max / 4
@@ -30,29 +38,32 @@ LARGE = np.finfo(np.float64).max / 4
 
 def _finite(values, nan: float) -> np.ndarray:
     array = np.asarray(values, dtype=np.float64).ravel()
+    if np.isfinite(array).all():  # the usual case, without nan_to_num's copies
+        return array
     return np.nan_to_num(array, nan=nan, posinf=LARGE, neginf=0.0)
 
 
+def _number(value, nan: float) -> float:
+    """A float capacity: NaN as ``nan``, +inf as LARGE (math on a scalar: nan_to_num is slow)."""
+    value = float(value)
+    return nan if value != value else min(value, LARGE)
+
+
+def _in_bins(ms, capacity, n_bins) -> np.ndarray:
+    """Costs (ms) in whole bins of ``capacity``, rounded up (less a relative 1e-9 that float
+    division adds to whole bins); at most n_bins + 1 (does not fit), NaN as that too."""
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        scaled = np.minimum(np.asarray(ms, np.float64) / capacity * n_bins, n_bins + 1.0)
+    if not np.isfinite(scaled).all():
+        scaled = np.nan_to_num(scaled, nan=n_bins + 1.0)
+    return np.ceil(scaled * (1.0 - 1e-9)).astype(np.int64)
+
+
 def _dynamic_programme(values, weights, capacity_bins) -> np.ndarray:
-    """Exact 0/1 knapsack over integer ``weights`` (>= 1) within ``capacity_bins``: a mask."""
-    n = len(values)
-    best = np.zeros(capacity_bins + 1)
-    took = np.zeros((n, capacity_bins + 1), dtype=bool)
-    for index in range(n):
-        weight = int(weights[index])
-        if weight > capacity_bins:
-            continue
-        candidate = best[:capacity_bins + 1 - weight] + values[index]
-        better = candidate > best[weight:]
-        took[index, weight:] = better
-        best[weight:] = np.where(better, candidate, best[weight:])
-    chosen = np.zeros(n, dtype=bool)
-    remaining = capacity_bins
-    for index in range(n - 1, -1, -1):
-        if took[index, remaining]:
-            chosen[index] = True
-            remaining -= int(weights[index])
-    return chosen
+    """Exact 0/1 knapsack over integer ``weights`` (>= 1) within ``capacity_bins``: a mask (the
+    grouped programme with one group that costs nothing)."""
+    return _grouped_programme(values, weights, np.zeros(len(values), np.int64), np.zeros(1, np.int64),
+                              capacity_bins)
 
 
 def bins_for(n_items: int, bins: int = DEFAULT_BINS) -> int:
@@ -66,12 +77,12 @@ def _binned(values, costs, capacity, bins) -> np.ndarray:
     if capacity <= 0 or len(values) == 0:
         return np.zeros(len(values), dtype=bool)
     n_bins = bins_for(len(values), bins)
-    # Rounded up (less a relative 1e-9 that float division adds to whole bins): a chosen set of
-    # rounded cost <= n_bins has true cost <= capacity.  Divided by T first (T may be subnormal).
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        in_bins = np.nan_to_num(np.minimum(costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
-    weights = np.maximum(np.ceil(in_bins * (1.0 - 1e-9)), 1).astype(np.int64)
-    return _dynamic_programme(values, weights, n_bins)
+    # Rounded up: a chosen set of rounded cost <= n_bins has true cost <= capacity.
+    weights = np.maximum(_in_bins(costs, capacity, n_bins), 1)
+    one_group = np.zeros(len(values), np.int64)
+    picked = _reduced(np.asarray(values, np.float64)[:, None], weights[:, None], one_group, np.zeros(1, np.int64),
+                      n_bins)
+    return _dynamic_programme(values, weights, n_bins) if picked is None else picked
 
 
 def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
@@ -81,7 +92,7 @@ def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
     if values.shape != costs.shape:
         raise ValueError(f"values and costs differ in shape: {values.shape} vs {costs.shape}")
     costs = np.maximum(costs, 0.0)
-    capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=np.finfo(np.float64).max / 4))
+    capacity = _number(capacity, nan=0.0)
     chosen = np.zeros(len(values), dtype=bool)
     if capacity < 0 or len(values) == 0:
         return chosen
@@ -127,7 +138,7 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None
     if groups.shape != (n_items,) or (n_items and (groups.min() < 0 or groups.max() >= len(group_costs))):
         raise ValueError("groups must give each item an index into group_costs")
     choice = np.full(n_items, -1, np.int64)
-    capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=LARGE))
+    capacity = _number(capacity, nan=0.0)
     if n_items == 0 or n_options == 0 or capacity < 0:
         return choice
     free = np.where((costs <= 0) & (values > 0) & (group_costs[groups] <= 0)[:, None], values, -np.inf)
@@ -140,60 +151,99 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None
         return choice
     used_groups = np.unique(groups[rows])
     n_bins = bins_for(len(rows) + len(used_groups), bins)
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # in bins of T (T may be subnormal)
-        weights = np.nan_to_num(np.minimum(costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
-        group_weights = np.nan_to_num(np.minimum(group_costs / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
-    weights = np.ceil(weights * (1.0 - 1e-9)).astype(np.int64)  # 0 only for a free option
-    group_weights = np.ceil(group_weights * (1.0 - 1e-9)).astype(np.int64).tolist()
-    best = np.zeros(n_bins + 1)
-    took = np.full((len(rows), n_bins + 1), -1, np.int8 if n_options < 127 else np.int64)
-    # One row update: the table with each option taken (row o + 1 of ``table``; -inf where it
-    # does not fit) against the table without (row 0), the best per bin and which option won.
-    # Per group the programme runs from the table with the group's cost paid ("opened"), and the
-    # group is used only where that ends better than without it.
-    table = np.empty((n_options + 1, n_bins + 1))
-    columns = np.arange(n_bins + 1)
-    labels = np.arange(-1, n_options, dtype=took.dtype)
-    row_weights = np.minimum(weights, n_bins + 1).tolist()
-    row_values = values.tolist()
-    row_groups = groups[rows]
-    trail = []
-    for group in used_groups.tolist():
-        fixed = group_weights[group]
-        if fixed > n_bins:
-            continue
-        members = np.flatnonzero(row_groups == group).tolist()
-        opened = np.full(n_bins + 1, -np.inf)
-        opened[fixed:] = best[:n_bins + 1 - fixed]
-        for position in members:
-            row = int(rows[position])
-            table[0] = opened
-            table[1:] = -np.inf
-            for option in np.flatnonzero(usable[row]).tolist():
-                weight = row_weights[row][option]
-                if weight <= n_bins:
-                    np.add(opened[:n_bins + 1 - weight], row_values[row][option], out=table[option + 1, weight:])
-            winner = table.argmax(axis=0)
-            opened = table[winner, columns]
-            took[position] = labels[winner]
-        use = opened > best
-        trail.append((members, use, fixed))
-        best = np.where(use, opened, best)
-    remaining = n_bins
-    for members, use, fixed in reversed(trail):
-        if not use[remaining]:
-            continue
-        for position in reversed(members):
-            option = int(took[position, remaining])
-            if option >= 0:
-                choice[rows[position]] = option
-                remaining -= int(weights[rows[position], option])
-        remaining -= fixed
+    weights = _in_bins(costs, capacity, n_bins)  # 0 only for a free option (T may be subnormal)
+    group_weights = _in_bins(group_costs, capacity, n_bins).tolist()
+    picked = None
+    if len(rows) >= REDUCE_FROM:
+        picked = _reduced_choices(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
+    if picked is None:
+        picked = _choices_programme(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
+    choice[rows] = picked
     flat = np.where(usable, values, -np.inf).ravel()
     single = int(np.argmax(flat))
     if flat[single] > float(sum(values[i, o] for i, o in enumerate(choice) if o >= 0)):
         choice[:] = -1
         choice[single // n_options] = single % n_options
+    return choice
+
+
+def _choices_programme(values, weights, usable, groups, group_weights, capacity_bins) -> np.ndarray:
+    """The exact multiple-choice programme over whole-bin ``weights`` (rows x options) within
+    ``capacity_bins``: the option per row, -1 for none.
+
+    Per group, one table row per item: the best value at each bin with the items so far (the
+    group's weight paid at the start), each usable option two numpy calls.  The trace back finds
+    where a row gained on the one before and which option gave that value (the first that did:
+    the same sums in the same order, so equal to the bit)."""
+    n_rows, n_options = values.shape
+    choice = np.full(n_rows, -1, np.int64)
+    if capacity_bins < 0 or n_rows == 0:
+        return choice
+    size = capacity_bins + 1
+    best = np.zeros(size)
+    shifted = np.empty(size)
+    row_weights, row_values = np.asarray(weights).tolist(), np.asarray(values).tolist()
+    row_options = [[option for option, fits in enumerate(flags) if fits]
+                   for flags in (np.asarray(usable, bool) & (np.asarray(weights) <= capacity_bins)).tolist()]
+    trail = []  # per group with items: (its items, its table, opened-at mask, its fixed bins)
+    for group in np.unique(groups).tolist():
+        fixed = int(group_weights[group])
+        if fixed > capacity_bins:
+            continue
+        members = np.flatnonzero(groups == group).tolist()
+        table = np.empty((len(members) + 1, size))
+        table[0, :fixed] = -np.inf
+        table[0, fixed:] = best[:size - fixed]
+        for position, member in enumerate(members):
+            before, row = table[position], table[position + 1]
+            row[:] = before
+            for option in row_options[member]:
+                weight = row_weights[member][option]
+                gained = shifted[:size - weight]
+                np.add(before[:size - weight], row_values[member][option], out=gained)
+                np.maximum(row[weight:], gained, out=row[weight:])
+        opened = table[-1]
+        use = opened > best
+        trail.append((members, table, use, fixed))
+        best = np.where(use, opened, best)
+    remaining = capacity_bins
+    for members, table, use, fixed in reversed(trail):
+        if not use[remaining]:
+            continue
+        for position in range(len(members) - 1, -1, -1):
+            member, now = members[position], float(table[position + 1, remaining])
+            if not now > float(table[position, remaining]):
+                continue
+            for option in row_options[member]:
+                weight = row_weights[member][option]
+                if weight <= remaining and float(table[position, remaining - weight]) + row_values[member][option] == now:
+                    choice[member] = option
+                    remaining -= weight
+                    break
+        remaining -= fixed
+    return choice
+
+
+def _reduced_choices(values, weights, usable, groups, group_weights, capacity_bins):
+    """:func:`_choices_programme` after :func:`knapsack_bounds.fix`: the rows every optimum fixes,
+    then the programme over the free rows (their excluded options dropped) within the bins the
+    fixed ones leave (their groups paid).  None when nothing is fixed."""
+    masked = np.where(usable, values, -np.inf)
+    group_array = np.asarray(group_weights, np.float64)
+    fixed = knapsack_bounds.reduce(masked, weights, groups, group_array, capacity_bins)
+    free = fixed == knapsack_bounds.FREE
+    if free.all():
+        return None
+    forced = np.flatnonzero(fixed >= 0)
+    opened = np.unique(groups[forced])
+    left = capacity_bins - int(weights[forced, fixed[forced]].sum()) - int(group_array[opened].sum())
+    if left < 0:  # cannot happen for an exact bound; the whole programme rather than a wrong answer
+        return None
+    still_due = np.array(group_weights, np.int64)
+    still_due[opened] = 0
+    choice = np.where(fixed >= 0, fixed, -1)
+    rows = np.flatnonzero(free)
+    choice[rows] = _choices_programme(values[rows], weights[rows], usable[rows], groups[rows], still_due, left)
     return choice
 
 
@@ -212,7 +262,7 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
         raise ValueError(f"values, costs and groups differ in shape: {values.shape}, {costs.shape}, {groups.shape}")
     if len(groups) and (groups.min() < 0 or groups.max() >= len(group_costs)):
         raise ValueError("a group index is outside group_costs")
-    capacity = float(np.nan_to_num(capacity, nan=0.0, posinf=LARGE))
+    capacity = _number(capacity, nan=0.0)
     chosen = np.zeros(len(values), dtype=bool)
     if capacity < 0 or len(values) == 0:
         return chosen
@@ -223,48 +273,88 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
     if len(useful) > EXACT_LIMIT or capacity <= 0:
         return _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins)
     n_bins = bins_for(len(useful) + len(group_costs), bins)
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        def in_bins(ms):
-            scaled = np.nan_to_num(np.minimum(ms / capacity * n_bins, n_bins + 1.0), nan=n_bins + 1.0)
-            return np.ceil(scaled * (1.0 - 1e-9)).astype(np.int64)
-        weights, group_weights = in_bins(costs[useful]), in_bins(group_costs)
-    best = np.zeros(n_bins + 1)
-    trail = []  # per group with useful items: (group, its items, took, opened-at mask)
-    weight_of, value_of = weights.tolist(), values[useful].tolist()
-    for group in np.unique(groups[useful]).tolist():
-        members = np.flatnonzero(groups[useful] == group)
-        fixed = int(group_weights[group])
-        if fixed > n_bins:
-            continue
-        opened = np.full(n_bins + 1, -np.inf)
-        opened[fixed:] = best[:n_bins + 1 - fixed]
-        took = np.zeros((len(members), n_bins + 1), dtype=bool)
-        for position, member in enumerate(members.tolist()):
-            weight = weight_of[member]
-            if weight > n_bins - fixed:
-                continue
-            candidate = opened[:n_bins + 1 - weight] + value_of[member]
-            segment = opened[weight:]
-            better = np.greater(candidate, segment, out=took[position, weight:])
-            np.copyto(segment, candidate, where=better)
-        # Opening the group pays only if it buys something: an empty open group is never better.
-        use = opened > best
-        trail.append((members, took, use, fixed))
-        best = np.where(use, opened, best)
-    remaining = n_bins
-    for members, took, use, fixed in reversed(trail):
-        if not use[remaining]:
-            continue
-        for position in range(len(members) - 1, -1, -1):
-            if took[position, remaining]:
-                chosen[useful[members[position]]] = True
-                remaining -= int(weights[members[position]])
-        remaining -= fixed
+    weights, group_weights = _in_bins(costs[useful], capacity, n_bins), _in_bins(group_costs, capacity, n_bins)
+    value_of, group_of = values[useful], groups[useful]
+    picked = _reduced(value_of[:, None], weights[:, None], group_of, group_weights, n_bins)
+    if picked is None:  # nothing fixed: the programme over every item
+        picked = _grouped_programme(value_of, weights, group_of, group_weights, n_bins)
+    chosen[useful[picked]] = True
     single = useful[np.argmax(values[useful])]
     if values[single] > float(np.sum(values[chosen])):
         chosen[:] = False
         chosen[single] = True
     return chosen
+
+
+def _grouped_programme(values, weights, groups, group_weights, capacity_bins) -> np.ndarray:
+    """The exact grouped programme over whole-bin ``weights`` within ``capacity_bins``: a mask.
+
+    Per group, one table row per item: the best value at each bin with the items so far (the
+    group's weight paid at the start).  Three numpy calls per item, no allocation; the trace back
+    reads where a row gained on the one before (the item was taken)."""
+    chosen = np.zeros(len(values), dtype=bool)
+    if capacity_bins < 0:
+        return chosen
+    size = capacity_bins + 1
+    best = np.zeros(size)
+    trail = []  # per group with items: (its items, its table, opened-at mask, its fixed bins)
+    weight_of, value_of = np.asarray(weights).tolist(), np.asarray(values).tolist()
+    for group in np.unique(groups).tolist():
+        members = np.flatnonzero(groups == group).tolist()
+        fixed = int(group_weights[group])
+        if fixed > capacity_bins:
+            continue
+        table = np.empty((len(members) + 1, size))
+        table[0, :fixed] = -np.inf
+        table[0, fixed:] = best[:size - fixed]
+        for position, member in enumerate(members):
+            before, row = table[position], table[position + 1]
+            weight = weight_of[member]
+            if weight > capacity_bins - fixed:
+                row[:] = before
+                continue
+            row[:weight] = before[:weight]
+            tail = row[weight:]
+            np.add(before[:size - weight], value_of[member], out=tail)
+            np.maximum(tail, before[weight:], out=tail)
+        opened = table[-1]
+        # Opening the group pays only if it buys something: an empty open group is never better.
+        use = opened > best
+        trail.append((members, table, use, fixed))
+        best = np.where(use, opened, best)
+    remaining = capacity_bins
+    for members, table, use, fixed in reversed(trail):
+        if not use[remaining]:
+            continue
+        for position in range(len(members) - 1, -1, -1):
+            if table[position + 1, remaining] > table[position, remaining]:
+                chosen[members[position]] = True
+                remaining -= int(weight_of[members[position]])
+        remaining -= fixed
+    return chosen
+
+
+def _reduced(values, weights, groups, group_weights, capacity_bins):
+    """The grouped 0/1 programme after :func:`knapsack_bounds.fix`: the items every optimum takes,
+    then the programme over the free ones within the bins they leave (their groups paid).  None when
+    the bound fixes nothing (the caller runs the whole programme)."""
+    if len(values) < REDUCE_FROM:
+        return None
+    fixed = knapsack_bounds.reduce(values, weights, groups, group_weights, capacity_bins)
+    free = fixed == knapsack_bounds.FREE
+    if free.all():
+        return None
+    forced = fixed == 0
+    opened = np.unique(groups[forced])
+    left = capacity_bins - int(weights[forced, 0].sum()) - int(group_weights[opened].sum())
+    if left < 0:  # cannot happen for an exact bound; the whole programme rather than a wrong answer
+        return None
+    still_due = np.array(group_weights, np.int64)
+    still_due[opened] = 0
+    picked = forced.copy()
+    picked[np.flatnonzero(free)[_grouped_programme(values[free, 0], weights[free, 0], groups[free], still_due,
+                                                   left)]] = True
+    return picked
 
 
 SUBSET_GROUPS = 4
