@@ -323,12 +323,12 @@ class BenefitSelector:
             old = self.estimates.get(key)
             if tier < 1.0 and old is not None and old > 0 and self.measured_at.get(key) == 1.0:
                 # Measured at a reduced rate right after a full-rate measurement: the share kept.
-                share = float(np.clip(seen / old, KEEP_RANGE[0], KEEP_RANGE[1]))
+                share = min(max(seen / old, KEEP_RANGE[0]), KEEP_RANGE[1])
                 before = self.keep(effect, tier)
                 self.kept[(effect, tier)] = before + KEEP_SMOOTHING * (share - before)
             self.measured_at[key] = tier
             # What a reduced rate changed, as the full rate's estimate (over its kept share).
-            value = float(np.clip(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0, MAX_VALUE))
+            value = min(max(seen / (self.keep(effect, tier) if tier < 1.0 else 1.0), 0.0), MAX_VALUE)
             self.estimates[key] = value if old is None else old + SMOOTHING * (value - old)
             self.observations[key] = self.observations.get(key, 0) + 1
             self.waited.pop(key, None)
