@@ -124,11 +124,15 @@ def read_selection(run_dir, summary=None):
 class SelectionStates:
     """Each frame's (element, selected) pairs of a run in the order of ``selection.csv``, read in one
     streaming pass and kept compact (an index and a byte per row, not a dict): what the report's
-    flips and popping need.  Iterating yields ``{"frame", "element", "selected"}`` dicts."""
+    flips and popping need.  Iterating yields ``{"frame", "element", "selected"}`` dicts, with
+    ``"effects"`` and ``"rate"`` where the log has them (``BENEFIT``: what of a traced element was
+    traced, at which rate; popping counts a change of them as a pop), kept as an index into a
+    table of the distinct pairs."""
 
     def __init__(self, run_dir, summary=None):
         self.names, index = [], {}
-        self.by_frame = {}  # frame -> (array of element indices, bytearray of selected flags)
+        self.traced_as, traced_index = [], {}  # distinct (effects, rate) pairs
+        self.by_frame = {}  # frame -> (element indices, selected flags, (effects, rate) indices or -1)
         for row in iter_selection(run_dir, summary):
             name = str(row["element"])
             position = index.get(name)
@@ -137,15 +141,27 @@ class SelectionStates:
                 self.names.append(name)
             entry = self.by_frame.get(row["frame"])
             if entry is None:
-                entry = self.by_frame[row["frame"]] = (array.array("i"), bytearray())
+                entry = self.by_frame[row["frame"]] = (array.array("i"), bytearray(), array.array("i"))
             entry[0].append(position)
             entry[1].append(1 if row["selected"] else 0)
+            traced = (row.get("effects"), row.get("rate"))
+            if traced == (None, None):
+                entry[2].append(-1)
+            else:
+                at = traced_index.get(traced)
+                if at is None:
+                    at = traced_index[traced] = len(self.traced_as)
+                    self.traced_as.append(traced)
+                entry[2].append(at)
         self._flips = None
 
     def __iter__(self):
-        for frame, (elements, flags) in self.by_frame.items():
-            for position, selected in zip(elements, flags):
-                yield {"frame": frame, "element": self.names[position], "selected": bool(selected)}
+        for frame, (elements, flags, traced) in self.by_frame.items():
+            for position, selected, at in zip(elements, flags, traced):
+                row = {"frame": frame, "element": self.names[position], "selected": bool(selected)}
+                if at >= 0:
+                    row["effects"], row["rate"] = self.traced_as[at]
+                yield row
 
     def __len__(self):
         return sum(len(flags) for _, flags in self.by_frame.values())
@@ -156,7 +172,7 @@ class SelectionStates:
             frames = sorted(self.by_frame)
             states = {}
             for frame in frames:
-                elements, flags = self.by_frame[frame]
+                elements, flags, _ = self.by_frame[frame]
                 for position, selected in zip(elements, flags):
                     states.setdefault(position, bytearray()).append(selected)
             count = len(frames)

@@ -5,6 +5,7 @@ import OpenEXR
 import pytest
 
 from phrt.phrt_addon.report import metrics, popping
+from phrt.phrt_addon.runs import run_files
 from phrt.phrt_addon.runs.run_log import RunLog
 
 HEIGHT, WIDTH = 40, 60
@@ -127,3 +128,34 @@ def test_a_change_of_rate_or_effects_while_traced_is_an_items_pop(tmp_path):
     assert [(pop.frame, pop.element, pop.kind) for pop in result.pops] == [(2, "Ball", "items"), (3, "Box", "items")]
     assert result.per_100_frames("state") == 0.0
     assert result.per_100_frames("items") == pytest.approx(result.per_100_frames())
+
+
+def test_the_reports_compact_selection_keeps_what_was_traced_so_items_pops_are_counted(tmp_path):
+    """The report streams selection.csv into run_files.SelectionStates and hands that to popping:
+    the effects and rate columns must survive it, or no "items" pop is ever measured (they were
+    dropped before: every sweep's item_popping read 0)."""
+    reference = make_run(tmp_path, "raytrace", [(True, True)] * 3)
+    run_dir = tmp_path / "benefit"
+    log = RunLog(run_dir)
+    (run_dir / "frames").mkdir()
+    for frame, effects in enumerate(["reflections", "reflections;shadows", "reflections;shadows"], start=1):
+        log.add_frame({"frame": frame, "mode": "HYBRID", "total_ms": 10.0, "raster_ms": 5.0, "select_ms": 0.1,
+                       "trace_ms": 4.0, "composite_ms": 0.9, "budget_ms": 10.0, "predicted_trace_ms": 4.0,
+                       "n_candidates": 2, "n_visible": 2, "n_selected": 2, "rays": 0},
+                      [{"frame": frame, "element": element, "visible": True, "A": 0.1, "P": 0.5, "D": 2.0,
+                        "V": 1.0, "Q": 1.0, "C": 1.0, "K": 1.0, "S": 1, "R": 1.0, "selected": True, "reason": "",
+                        "predicted_ms": 1.0, "benefit": 1.0, "effects": effects if element == "Ball" else "shadows",
+                        "rate": 1.0} for element in ("Ball", "Box")])
+        # The ball's look changes with its traced effects (its shadow term now traced).
+        image = scene_image(frame, True, True)
+        if frame >= 2:
+            image[BALL] = (0.2, 0.6, 0.9)
+        write_frame(run_dir / "frames" / f"{frame:04d}.exr", image, element_image())
+    log.close({"scene": "test", "path": "path1", "resolution": [WIDTH, HEIGHT], "blender_version": "5.0.1",
+               "embreex_version": "4.4.0.post1"})
+    states = run_files.SelectionStates(run_dir)
+    assert {(row["element"], row["effects"]) for row in states if row["frame"] == 2} == \
+        {("Ball", "reflections;shadows"), ("Box", "shadows")}
+    result = popping.measure_popping(run_dir, reference, selection_rows=states)
+    assert [(pop.frame, pop.element, pop.kind) for pop in result.pops] == [(2, "Ball", "items")]
+    assert result.per_100_frames("items") > 0.0
