@@ -124,11 +124,12 @@ class BenefitSelector:
         self.kept: dict[tuple[str, float], float] = {}  # (effect, rate) -> learned share of the benefit
         self.measured_at: dict[tuple[str, str], float] = {}  # item -> the rate of its last measurement
         self.frames = 0
+        self._names_keys = None  # (the last frame's names, their item keys)
         self.time = FrameTime()  # the margin, the steady time left, the aim
 
     def _keys(self, names) -> list:
         """:func:`_item_keys`, kept while the element names stay those of the last frame."""
-        cached = self.__dict__.get("_names_keys")
+        cached = self._names_keys
         if cached is None or cached[0] != list(names):
             cached = (list(names), _item_keys(names))
             self._names_keys = cached

@@ -59,13 +59,6 @@ def _in_bins(ms, capacity, n_bins) -> np.ndarray:
     return np.ceil(scaled * (1.0 - 1e-9)).astype(np.int64)
 
 
-def _dynamic_programme(values, weights, capacity_bins) -> np.ndarray:
-    """Exact 0/1 knapsack over integer ``weights`` (>= 1) within ``capacity_bins``: a mask (the
-    grouped programme with one group that costs nothing)."""
-    return _grouped_programme(values, weights, np.zeros(len(values), np.int64), np.zeros(1, np.int64),
-                              capacity_bins)
-
-
 def bins_for(n_items: int, bins: int = DEFAULT_BINS) -> int:
     """Bins of T for ``n_items``: at least ``bins``, and four per item (up to MAX_BINS) so that
     many small items do not lose most of T to the rounding."""
@@ -79,10 +72,7 @@ def _binned(values, costs, capacity, bins) -> np.ndarray:
     n_bins = bins_for(len(values), bins)
     # Rounded up: a chosen set of rounded cost <= n_bins has true cost <= capacity.
     weights = np.maximum(_in_bins(costs, capacity, n_bins), 1)
-    one_group = np.zeros(len(values), np.int64)
-    picked = _reduced(np.asarray(values, np.float64)[:, None], weights[:, None], one_group, np.zeros(1, np.int64),
-                      n_bins)
-    return _dynamic_programme(values, weights, n_bins) if picked is None else picked
+    return _zero_one(np.asarray(values, np.float64), weights, np.zeros(len(values), np.int64), [0], n_bins)
 
 
 def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
@@ -153,12 +143,7 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None
     n_bins = bins_for(len(rows) + len(used_groups), bins)
     weights = _in_bins(costs, capacity, n_bins)  # 0 only for a free option (T may be subnormal)
     group_weights = _in_bins(group_costs, capacity, n_bins).tolist()
-    picked = None
-    if len(rows) >= REDUCE_FROM:
-        picked = _reduced_choices(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
-    if picked is None:
-        picked = _choices_programme(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
-    choice[rows] = picked
+    choice[rows] = _programme(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
     flat = np.where(usable, values, -np.inf).ravel()
     single = int(np.argmax(flat))
     if flat[single] > float(sum(values[i, o] for i, o in enumerate(choice) if o >= 0)):
@@ -224,27 +209,33 @@ def _choices_programme(values, weights, usable, groups, group_weights, capacity_
     return choice
 
 
-def _reduced_choices(values, weights, usable, groups, group_weights, capacity_bins):
-    """:func:`_choices_programme` after :func:`knapsack_bounds.fix`: the rows every optimum fixes,
-    then the programme over the free rows (their excluded options dropped) within the bins the
-    fixed ones leave (their groups paid).  None when nothing is fixed."""
-    masked = np.where(usable, values, -np.inf)
-    group_array = np.asarray(group_weights, np.float64)
-    fixed = knapsack_bounds.reduce(masked, weights, groups, group_array, capacity_bins)
-    free = fixed == knapsack_bounds.FREE
-    if free.all():
-        return None
-    forced = np.flatnonzero(fixed >= 0)
-    opened = np.unique(groups[forced])
-    left = capacity_bins - int(weights[forced, fixed[forced]].sum()) - int(group_array[opened].sum())
-    if left < 0:  # cannot happen for an exact bound; the whole programme rather than a wrong answer
-        return None
-    still_due = np.array(group_weights, np.int64)
-    still_due[opened] = 0
-    choice = np.where(fixed >= 0, fixed, -1)
-    rows = np.flatnonzero(free)
-    choice[rows] = _choices_programme(values[rows], weights[rows], usable[rows], groups[rows], still_due, left)
-    return choice
+def _programme(values, weights, usable, groups, group_weights, capacity_bins) -> np.ndarray:
+    """:func:`_choices_programme`, from ``REDUCE_FROM`` rows after :func:`knapsack_bounds.reduce`:
+    the rows every optimum fixes, then the programme over the free rows within the bins the fixed
+    ones leave (their groups paid).  The same choice as the programme over every row."""
+    if len(values) >= REDUCE_FROM:
+        group_array = np.asarray(group_weights, np.float64)
+        fixed = knapsack_bounds.reduce(np.where(usable, values, -np.inf), weights, groups, group_array,
+                                       capacity_bins)
+        free = fixed == knapsack_bounds.FREE
+        forced = np.flatnonzero(fixed >= 0)
+        opened = np.unique(groups[forced])
+        left = capacity_bins - int(weights[forced, fixed[forced]].sum()) - int(group_array[opened].sum())
+        if not free.all() and left >= 0:  # left < 0 cannot happen for an exact bound
+            still_due = np.array(group_weights, np.int64)
+            still_due[opened] = 0
+            choice = np.where(fixed >= 0, fixed, -1)
+            rows = np.flatnonzero(free)
+            choice[rows] = _choices_programme(values[rows], weights[rows], usable[rows], groups[rows], still_due,
+                                              left)
+            return choice
+    return _choices_programme(values, weights, usable, groups, group_weights, capacity_bins)
+
+
+def _zero_one(values, weights, groups, group_weights, capacity_bins) -> np.ndarray:
+    """The 0/1 grouped programme (a mask): :func:`_programme` with one option per item."""
+    return _programme(values[:, None], np.asarray(weights)[:, None], np.ones((len(values), 1), bool),
+                      np.asarray(groups, np.int64), group_weights, capacity_bins) >= 0
 
 
 def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
@@ -274,87 +265,12 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
         return _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins)
     n_bins = bins_for(len(useful) + len(group_costs), bins)
     weights, group_weights = _in_bins(costs[useful], capacity, n_bins), _in_bins(group_costs, capacity, n_bins)
-    value_of, group_of = values[useful], groups[useful]
-    picked = _reduced(value_of[:, None], weights[:, None], group_of, group_weights, n_bins)
-    if picked is None:  # nothing fixed: the programme over every item
-        picked = _grouped_programme(value_of, weights, group_of, group_weights, n_bins)
-    chosen[useful[picked]] = True
+    chosen[useful[_zero_one(values[useful], weights, groups[useful], group_weights, n_bins)]] = True
     single = useful[np.argmax(values[useful])]
     if values[single] > float(np.sum(values[chosen])):
         chosen[:] = False
         chosen[single] = True
     return chosen
-
-
-def _grouped_programme(values, weights, groups, group_weights, capacity_bins) -> np.ndarray:
-    """The exact grouped programme over whole-bin ``weights`` within ``capacity_bins``: a mask.
-
-    Per group, one table row per item: the best value at each bin with the items so far (the
-    group's weight paid at the start).  Three numpy calls per item, no allocation; the trace back
-    reads where a row gained on the one before (the item was taken)."""
-    chosen = np.zeros(len(values), dtype=bool)
-    if capacity_bins < 0:
-        return chosen
-    size = capacity_bins + 1
-    best = np.zeros(size)
-    trail = []  # per group with items: (its items, its table, opened-at mask, its fixed bins)
-    weight_of, value_of = np.asarray(weights).tolist(), np.asarray(values).tolist()
-    for group in np.unique(groups).tolist():
-        members = np.flatnonzero(groups == group).tolist()
-        fixed = int(group_weights[group])
-        if fixed > capacity_bins:
-            continue
-        table = np.empty((len(members) + 1, size))
-        table[0, :fixed] = -np.inf
-        table[0, fixed:] = best[:size - fixed]
-        for position, member in enumerate(members):
-            before, row = table[position], table[position + 1]
-            weight = weight_of[member]
-            if weight > capacity_bins - fixed:
-                row[:] = before
-                continue
-            row[:weight] = before[:weight]
-            tail = row[weight:]
-            np.add(before[:size - weight], value_of[member], out=tail)
-            np.maximum(tail, before[weight:], out=tail)
-        opened = table[-1]
-        # Opening the group pays only if it buys something: an empty open group is never better.
-        use = opened > best
-        trail.append((members, table, use, fixed))
-        best = np.where(use, opened, best)
-    remaining = capacity_bins
-    for members, table, use, fixed in reversed(trail):
-        if not use[remaining]:
-            continue
-        for position in range(len(members) - 1, -1, -1):
-            if table[position + 1, remaining] > table[position, remaining]:
-                chosen[members[position]] = True
-                remaining -= int(weight_of[members[position]])
-        remaining -= fixed
-    return chosen
-
-
-def _reduced(values, weights, groups, group_weights, capacity_bins):
-    """The grouped 0/1 programme after :func:`knapsack_bounds.fix`: the items every optimum takes,
-    then the programme over the free ones within the bins they leave (their groups paid).  None when
-    the bound fixes nothing (the caller runs the whole programme)."""
-    if len(values) < REDUCE_FROM:
-        return None
-    fixed = knapsack_bounds.reduce(values, weights, groups, group_weights, capacity_bins)
-    free = fixed == knapsack_bounds.FREE
-    if free.all():
-        return None
-    forced = fixed == 0
-    opened = np.unique(groups[forced])
-    left = capacity_bins - int(weights[forced, 0].sum()) - int(group_weights[opened].sum())
-    if left < 0:  # cannot happen for an exact bound; the whole programme rather than a wrong answer
-        return None
-    still_due = np.array(group_weights, np.int64)
-    still_due[opened] = 0
-    picked = forced.copy()
-    picked[np.flatnonzero(free)[_grouped_programme(values[free, 0], weights[free, 0], groups[free], still_due,
-                                                   left)]] = True
-    return picked
 
 
 SUBSET_GROUPS = 4
