@@ -8,7 +8,9 @@ ray), so one cost per ray learned on a small item over-predicts a large one by 3
 item predicted too dear is never traced, so never measured again.  Here, per effect:
 
 * an item's ms against its rays: a power law, scale x rays ** exponent (``MIN_EXPONENT``..1),
-  through the last ``WINDOW`` traced frames, each frame's rays and ms divided among its items,
+  through the last ``WINDOW`` traced frames and, for the octaves of rays per item none of them
+  falls in, the latest frame of each (``ANCHOR_BASE``: a large item measured once keeps its own
+  price after the window has moved on), each frame's rays and ms divided among its items,
   over the pairs of frames whose rays an item are ``SPREAD`` apart (``MIN_PAIRS`` of them at
   least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
   against the rays); beyond the largest item of the window, growing as rays ** ``MIN_EXPONENT``
@@ -66,6 +68,11 @@ MIN_EXPONENT = 0.6
 # that really is too dear is probed less and less often.  Its items' rays ratios are kept (counted
 # rays, not timed).
 STALE_FRAMES = 8
+# Besides the last WINDOW traced frames, each effect keeps its latest frame in every octave of
+# rays per item (an anchor), so a large item measured once still prices its own range after the
+# window has moved on: atrium path1, the oak's shadows (35,000 rays, about 26 ms traced) were
+# priced from the small casters' frames alone once its frame left the window: 50 ms.
+ANCHOR_BASE = 2.0
 STALE_MAX_FRAMES = 128
 STALE_DISCOUNT = 2.0
 RATIO_SMOOTHING = 0.3
@@ -78,6 +85,7 @@ class ItemCosts:
 
     def __init__(self):
         self.samples = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # (rays, ms, setup ms, Embree ms)
+        self.anchors = {effect: {} for effect in EFFECTS}  # octave of rays per item -> its latest sample
         self.idle = np.zeros(len(EFFECTS), np.int64)  # frames each effect had items and was not traced
         self.stale_after = np.full(len(EFFECTS), STALE_FRAMES, np.int64)  # idle frames before a revision
         self.learned: set[str] = set()  # the effects measured at least once in this replay
@@ -121,6 +129,7 @@ class ItemCosts:
                 self._fit[effect] = (fixed / STALE_DISCOUNT, scale / STALE_DISCOUNT, exponent,
                                      embree / STALE_DISCOUNT, largest)
                 self.samples[effect].clear()
+                self.anchors[effect].clear()
             self.stale_after[j] = min(2 * self.stale_after[j], STALE_MAX_FRAMES)
             self.idle[j] = 0
 
@@ -191,13 +200,27 @@ class ItemCosts:
                 continue
             setup = float(shadow_setup_ms) if effect == "shadows" and np.isfinite(shadow_setup_ms) else 0.0
             inside = float(embree_ms[j]) if np.isfinite(embree_ms[j]) else 0.0
-            self.samples[effect].append((rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
-                                         float(np.count_nonzero(chosen[:, j]))))
-            self._fit[effect] = _fit(self.samples[effect], effect == "shadows")
+            sample = (rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
+                      float(np.count_nonzero(chosen[:, j])))
+            self.samples[effect].append(sample)
+            self.anchors[effect][_octave(rays / sample[4])] = sample
+            self._fit[effect] = _fit(self._window(effect), effect == "shadows")
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
                 self._pooled[j] = float(np.median(measured))
+
+
+    def _window(self, effect) -> list:
+        """The samples an effect's costs are fitted on: its last WINDOW traced frames and the
+        anchors (octaves of rays per item) none of them falls in."""
+        recent = list(self.samples[effect])
+        covered = {_octave(sample[0] / max(sample[4], 1.0)) for sample in recent}
+        return recent + [sample for octave, sample in self.anchors[effect].items() if octave not in covered]
+
+
+def _octave(rays_per_item: float) -> int:
+    return int(np.floor(np.log(max(rays_per_item, 1.0)) / np.log(ANCHOR_BASE)))
 
 
 def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]:

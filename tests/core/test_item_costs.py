@@ -177,3 +177,29 @@ def test_an_idle_effect_revises_its_costs_by_halves_ever_more_rarely():
     for _ in range(10 * item_costs.STALE_MAX_FRAMES):
         costs.tick(wanted, np.array([True, False, False]))
     assert costs.idle[0] == 0 and costs.stale_after[0] <= item_costs.STALE_MAX_FRAMES
+
+
+def test_a_large_item_measured_once_keeps_its_price_after_the_window_moves_on():
+    """A 22,000-ray caster traced once among frames of small casters (all at 1e-3 ms a ray): after
+    WINDOW more frames of small casters only, its frame is out of the window but still anchors
+    its octave of rays, so the caster is priced at its measured 22 ms, not the small ones'
+    extrapolation (2,000 rays grown as rays ** MIN_EXPONENT: 8.4 ms).  A newer frame of the same
+    octave replaces the anchor; a revision of the effect's costs clears the anchors too."""
+    costs = ItemCosts()
+    small = ([180], [840], [500, 500], [2000])
+    for casters in small:
+        power_frame(costs, casters, exponent=1.0, scale=1e-3, embree=1e-5)
+    power_frame(costs, [22000], exponent=1.0, scale=1e-3, embree=1e-5)
+    for frame in range(item_costs.WINDOW):
+        power_frame(costs, small[frame % len(small)], exponent=1.0, scale=1e-3, embree=1e-5)
+    assert all(sample[0] <= 2000 for sample in costs.samples["shadows"])  # the large frame left the window
+    oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
+    assert oak == pytest.approx(22.0, rel=1e-6)
+    # A newer frame in the same octave (20,000 rays) is the anchor now, the older one is gone.
+    power_frame(costs, [20000], exponent=1.0, scale=1e-3, embree=1e-5)
+    large = [sample for sample in costs.anchors["shadows"].values() if sample[0] > 2000]
+    assert [sample[0] for sample in large] == [20000.0]
+    # An idle effect's revision forgets its anchors with its window.
+    for _ in range(item_costs.STALE_FRAMES):
+        costs.tick(np.array([True, False, False]), np.zeros(3, bool))
+    assert not costs.anchors["shadows"] and not costs.samples["shadows"]
