@@ -68,13 +68,13 @@ MIN_EXPONENT = 0.6
 # that really is too dear is probed less and less often.  Its items' rays ratios are kept (counted
 # rays, not timed).
 STALE_FRAMES = 8
+STALE_MAX_FRAMES = 128
+STALE_DISCOUNT = 2.0
 # Besides the last WINDOW traced frames, each effect keeps its latest frame in every octave of
 # rays per item (an anchor), so a large item measured once still prices its own range after the
 # window has moved on: atrium path1, the oak's shadows (35,000 rays, about 26 ms traced) were
 # priced from the small casters' frames alone once its frame left the window: 50 ms.
 ANCHOR_BASE = 2.0
-STALE_MAX_FRAMES = 128
-STALE_DISCOUNT = 2.0
 RATIO_SMOOTHING = 0.3
 RATIO_RANGE = (1e-3, 1e3)
 MAX_MS = 1e12
@@ -209,7 +209,6 @@ class ItemCosts:
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
                 self._pooled[j] = float(np.median(measured))
-
 
     def _window(self, effect) -> list:
         """The samples an effect's costs are fitted on: its last WINDOW traced frames and the
