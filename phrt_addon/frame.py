@@ -37,7 +37,7 @@ from .select import selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
-from .raster.gbuffer import element_pixel_stats, front_points
+from .raster.gbuffer import element_pixel_stats, front_points, screen_rect
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
@@ -74,6 +74,7 @@ class FrameRenderer:
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None;
         # with it, per effect name the rate every element's effect is traced at (tools/rate_flip.py).
         self.forced_selection = None
+        self.crop_readback = True  # a frame tracing reflections and refractions only reads their rectangle
         self.forced_rates = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
 
@@ -89,7 +90,9 @@ class FrameRenderer:
     def render(self, snapshot: SceneSnapshot, raster: RasterFrame) -> FrameResult:
         settings = snapshot.settings
         mode = settings.mode.upper()
-        materials = shading.MaterialTable(snapshot.materials)
+        materials = getattr(raster, "materials", None)  # the raster half's table of this snapshot, if any
+        if not isinstance(materials, shading.MaterialTable):
+            materials = shading.MaterialTable(snapshot.materials)
         if self.cost_model is None:
             self.cost_model = CostModel()
         n_elements = len(snapshot.elements)
@@ -107,8 +110,9 @@ class FrameRenderer:
         learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR" \
             and not use_benefit
 
-        def read_layers(elements=None):
-            gbuffer = raster.gbuffer()
+        def read_layers(elements=None):  # with elements: only the rectangle their bounds project to
+            gbuffer = raster.gbuffer(None if elements is None or not self.crop_readback else screen_rect(
+                snapshot.camera, [element_bounds[i] for i in np.flatnonzero(elements[:-1])], raster.width, raster.height))
             return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials, elements),
                     "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials,
                                                elements)}
@@ -365,12 +369,8 @@ class FrameRenderer:
         casters = [index for index, element in enumerate(snapshot.elements)
                    if element.is_candidate and element.shadows and area_px[index] > 0
                    and element_bounds[index] is not None]
-        for light in snapshot.lights:
-            if not light.cast_shadows or not casters:
-                continue
-            light_index = ShadowRegionIndex(light, points)
-            for index in casters:
-                footprint[index] += scale * np.count_nonzero(light_index.region(element_bounds[index]))
+        for light in (light for light in snapshot.lights if light.cast_shadows and casters):
+            footprint[casters] += scale * ShadowRegionIndex(light, points).counts([element_bounds[i] for i in casters])
         return footprint
 
     # ------------------------------------------------------------------

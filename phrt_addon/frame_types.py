@@ -28,7 +28,9 @@ class RasterFrame(Protocol):
     front_normal: np.ndarray  # (h, w, 3) float32
     stats: dict
 
-    def gbuffer(self) -> GBuffer: ...
+    def gbuffer(self, rect=None) -> GBuffer:
+        """Both layers read back; with ``rect`` (x, y, w, h, row 0 at the bottom) at least the
+        pixels inside it, the others possibly cleared (not covered, no element)."""
 
     def shade(self, traced: "TracedTerms | None", measure_change: bool = False) -> np.ndarray | None: ...
 

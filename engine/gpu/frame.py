@@ -51,6 +51,7 @@ class GPUFrame:
         self.measure = False  # shade() also writes what the traced terms changed
         self.traced_flags = (0.0, 0.0, 0.0)
         self._gbuffer = None
+        self._gbuffer_rect = None  # the rectangle of the kept read-back (None: whole)
 
     # -- protocol --------------------------------------------------------------
     def draw(self):
@@ -108,10 +109,13 @@ class GPUFrame:
         self.raster_ms = _ms(start)
         self.stats["gbuffer_ms"] = self.raster_ms - setup_ms
 
-    def gbuffer(self) -> GBuffer:
-        """Both layers read back (float32 positions relative to the camera)."""
-        if self._gbuffer is None:
-            self._gbuffer = readback.read_gbuffer(gpu_module(), self, self.transparent_drawn)
+    def gbuffer(self, rect=None) -> GBuffer:
+        """Both layers read back (float32 positions relative to the camera); with ``rect`` (x, y,
+        w, h) only that rectangle, the other pixels cleared.  A read-back is kept for the frame:
+        a whole one serves any later call, a rectangle the same rectangle."""
+        if self._gbuffer is None or (self._gbuffer_rect is not None and rect != self._gbuffer_rect):
+            self._gbuffer = readback.read_gbuffer(gpu_module(), self, self.transparent_drawn, rect)
+            self._gbuffer_rect = rect
         return self._gbuffer
 
     def traced_change(self):

@@ -8,17 +8,17 @@ import numpy as np
 from ...phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
 
 
-def read(gpu, framebuffer, slot, kind, channels, width, height) -> np.ndarray:
+def read(gpu, framebuffer, slot, kind, channels, width, height, rect=None) -> np.ndarray:
     """Colour attachment ``slot`` as (h, w, channels) float32 (``kind`` "FLOAT") or uint32
-    ("UINT"); (h, w) for one channel."""
-    n = width * height * channels
-    buffer = gpu.types.Buffer(kind, n)
+    ("UINT"); (h, w) for one channel.  ``rect`` (x, y, w, h; row 0 at the bottom): only those
+    pixels, as an array of the rectangle's size."""
+    x, y, w, h = (0, 0, width, height) if rect is None else rect
+    buffer = gpu.types.Buffer(kind, w * h * channels)
     with framebuffer.bind():
-        framebuffer.read_color(0, 0, width, height, channels, slot, kind, data=buffer)
+        framebuffer.read_color(x, y, w, h, channels, slot, kind, data=buffer)
     dtype = np.float32 if kind == "FLOAT" else np.uint32
-    shape = (height, width, channels) if channels > 1 else (height, width)
     # The array keeps the buffer it views alive: no copy.
-    return np.asarray(buffer, dtype=dtype).reshape(shape)
+    return np.asarray(buffer, dtype=dtype).reshape((h, w, channels) if channels > 1 else (h, w))
 
 
 def read_target(gpu, frame, name, kind="FLOAT", channels=4) -> np.ndarray:
@@ -27,19 +27,35 @@ def read_target(gpu, frame, name, kind="FLOAT", channels=4) -> np.ndarray:
     return read(gpu, framebuffer, 0, kind, channels, frame.width, frame.height)
 
 
-def read_gbuffer(gpu, frame, transparent_drawn: bool) -> GBuffer:
+def read_gbuffer(gpu, frame, transparent_drawn: bool, rect=None) -> GBuffer:
     """Both layers of ``frame`` (float32 positions relative to the camera); the transparent one
-    empty when nothing transparent was drawn."""
+    empty when nothing transparent was drawn; with ``rect`` (x, y, w, h) only those pixels, the
+    others as cleared ones."""
     targets, width, height = frame.targets, frame.width, frame.height
     framebuffer = gpu.types.GPUFrameBuffer(color_slots=(
         targets["opaque_position"], targets["opaque_normal"], targets["opaque_element"],
         targets["transparent_position"], targets["transparent_normal"], targets["transparent_element"]))
 
     def layer(first_slot):
-        position = read(gpu, framebuffer, first_slot, "FLOAT", 4, width, height)
-        normal = read(gpu, framebuffer, first_slot + 1, "FLOAT", 4, width, height)
-        element = read(gpu, framebuffer, first_slot + 2, "UINT", 1, width, height)
-        return decode_layer(position, normal, element)
+        position = read(gpu, framebuffer, first_slot, "FLOAT", 4, width, height, rect)
+        normal = read(gpu, framebuffer, first_slot + 1, "FLOAT", 4, width, height, rect)
+        element = read(gpu, framebuffer, first_slot + 2, "UINT", 1, width, height, rect)
+        decoded = decode_layer(position, normal, element)
+        if rect is None:
+            return decoded
+        # Decoded inside the rectangle only, then placed among cleared pixels (at 640x480 decoding
+        # whole layers of zeros cost more than reading the rectangle).
+        x, y, w, h = rect
+
+        def placed(array, cleared):
+            whole = np.full((height, width) + array.shape[2:], cleared, array.dtype)
+            whole[y:y + h, x:x + w] = array
+            return whole
+
+        normal = placed(normal, 0.0)
+        return GBufferLayer(covered=placed(decoded.covered, False), position=placed(position, 0.0)[..., :3],
+                            normal=normal[..., :3], roughness=normal[..., 3], albedo=None, metallic=None,
+                            material=placed(decoded.material, -1), element=placed(decoded.element, -1))
 
     opaque = layer(0)
     transparent = layer(3) if transparent_drawn else GBufferLayer.empty(width, height)

@@ -37,8 +37,14 @@ class ReferenceRaster:
         self.front_normal = gbuffer.front_normal()
         self._change = None
 
-    def gbuffer(self) -> GBuffer:
-        return self._gbuffer
+    def gbuffer(self, rect=None) -> GBuffer:
+        """Both layers; with ``rect`` (x, y, w, h) only the pixels inside it, the others cleared,
+        as the GPU's read-back of a rectangle returns them."""
+        if rect is None:
+            return self._gbuffer
+        whole = self._gbuffer
+        return GBuffer(opaque=whole.opaque.cropped(rect), transparent=whole.transparent.cropped(rect),
+                       origin=whole.origin, view_depth=whole.view_depth)
 
     def _surface(self, layer, materials):
         camera = self.snapshot.camera

@@ -91,7 +91,7 @@ def measure_differences(snapshot, layers, change, traced, selected, element_boun
     """
     n = len(snapshot.elements)
     difference = np.zeros(n)
-    flat_change = np.asarray(change, np.float64).reshape(-1, change.shape[-1])
+    flat_change = np.asarray(change).reshape(-1, change.shape[-1])  # a view: float64 where summed
     owner = np.full(len(flat_change), -1, np.int64)
     for layer_name in ("opaque", "transparent"):  # the transparent layer's element wins
         pixels = layers[layer_name]
@@ -115,7 +115,7 @@ def shadow_differences(snapshot, layers, change, traced, casting, element_bounds
 
     n = len(snapshot.elements)
     difference = np.zeros(n)
-    flat_change = np.asarray(change, np.float64).reshape(-1, change.shape[-1])
+    flat_change = np.asarray(change).reshape(-1, change.shape[-1])  # a view: float64 where divided
     casters = [index for index in np.flatnonzero(casting)
                if snapshot.elements[index].shadows and element_bounds[index] is not None]
     if casters:

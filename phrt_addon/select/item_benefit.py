@@ -42,7 +42,7 @@ def measure(snapshot, layers, change, traced, chosen, element_bounds) -> np.ndar
     """(n, 3) summed per-pixel change of each traced item (``chosen`` (n, 3) the traced items)."""
     n = len(snapshot.elements)
     result = np.zeros((n, len(EFFECTS)))
-    flat_change = np.asarray(change, np.float64).reshape(-1, change.shape[-1])
+    flat_change = np.asarray(change).reshape(-1, change.shape[-1])  # float64 only where summed (bincount)
     for effect, column in (("reflections", 1), ("refractions", 2)):
         owner = np.full(len(flat_change), -1, np.int64)
         for layer_name in ("opaque", "transparent"):

@@ -22,6 +22,7 @@ class ElementBounds:
 
     def __init__(self):
         self._local = {}  # geometry key -> {element: (low, high)} in local space
+        self._world = {}  # (geometry key, matrix bytes) -> (elements, lows, highs) in world space
 
     def _local_bounds(self, mesh):
         cached = self._local.get(mesh.geometry_key)
@@ -39,24 +40,50 @@ class ElementBounds:
             self._local[mesh.geometry_key] = cached
         return cached
 
+    def _world_bounds(self, mesh):
+        """(elements, lows, highs) of one mesh in world space: its local boxes' corners moved by
+        its matrix, kept while its content and matrix stay (static geometry: every frame)."""
+        matrix = np.asarray(mesh.matrix_world, dtype=np.float64)
+        key = (mesh.geometry_key, matrix.tobytes())
+        cached = self._world.get(key)
+        if cached is None:
+            local = self._local_bounds(mesh)
+            elements = np.fromiter(local, np.int64, count=len(local))
+            if len(elements):
+                low = np.array([box[0] for box in local.values()])
+                high = np.array([box[1] for box in local.values()])
+                corners = transform_points(matrix, (low[:, None, :] + _CORNERS[None] * (high - low)[:, None, :])
+                                           .reshape(-1, 3)).reshape(len(elements), 8, 3)
+                cached = (elements, corners.min(axis=1), corners.max(axis=1))
+                for array in cached:  # shared by every frame's bounds: read-only
+                    array.setflags(write=False)
+            else:
+                cached = (elements, np.zeros((0, 3)), np.zeros((0, 3)))
+            if len(self._world) >= self.CACHE_LIMIT:
+                self._world.pop(next(iter(self._world)))
+            self._world[key] = cached
+        return cached
+
     def __call__(self, snapshot) -> list:
         """Per element, (min, max) world bounds, or None when it has no triangles."""
         bounds = [None] * len(snapshot.elements)
-        signs = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
         for mesh in snapshot.meshes:
             if mesh.n_triangles == 0:
                 continue
-            for element, (low, high) in self._local_bounds(mesh).items():
+            elements, lows, highs = self._world_bounds(mesh)
+            for element, world_low, world_high in zip(elements.tolist(), lows, highs):
                 if element >= len(bounds):
                     continue
-                corners = transform_points(mesh.matrix_world, low + signs * (high - low))
-                world_low, world_high = corners.min(axis=0), corners.max(axis=0)
                 if bounds[element] is None:
                     bounds[element] = (world_low, world_high)
                 else:
                     bounds[element] = (np.minimum(bounds[element][0], world_low),
                                        np.maximum(bounds[element][1], world_high))
         return bounds
+
+
+# The 8 corners of a unit box, (8, 3): 0 or 1 per axis.
+_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
 
 
 def shadow_region(light, bounds, points) -> np.ndarray:
@@ -153,6 +180,49 @@ class ShadowRegionIndex:
         start = np.searchsorted(self.sorted_key, key - reach - margin, side="left")
         stop = np.searchsorted(self.sorted_key, key + reach + margin, side="right")
         return start, stop
+
+    def counts(self, bounds_list, chunk: int = 1 << 18) -> np.ndarray:
+        """(C,) int64: how many points each caster's region holds, ``count_nonzero(region(b))``
+        for every ``b`` of ``bounds_list`` at once (casters by points, in blocks of about
+        ``chunk`` tests: a frame's footprint sub-sample against all its casters in a few numpy
+        calls instead of a few per caster)."""
+        if not len(bounds_list) or self.n == 0:
+            return np.zeros(len(bounds_list), np.int64)
+        low = np.array([b[0] for b in bounds_list], np.float64).reshape(-1, 3)
+        high = np.array([b[1] for b in bounds_list], np.float64).reshape(-1, 3)
+        centre = (low + high) / 2.0
+        radius = 0.5 * np.linalg.norm(high - low, axis=1) + 1e-6
+        result = np.zeros(len(centre), np.int64)
+        step = max(1, int(chunk) // self.n)
+        coords = self.coords
+        if self.sun:
+            light_space = centre @ self.basis.T  # (C, 3): u, v across, w along
+            cu, cv = light_space[:, 0].astype(np.float32), light_space[:, 1].astype(np.float32)
+            reach = (radius * radius).astype(np.float32)
+            downstream = (light_space[:, 2] - radius).astype(np.float32)
+            for first in range(0, len(centre), step):
+                part = slice(first, first + step)
+                du = coords[None, :, 0] - cu[part, None]
+                dv = coords[None, :, 1] - cv[part, None]
+                inside = (du * du + dv * dv <= reach[part, None]) & (coords[None, :, 2] > downstream[part, None])
+                result[part] = np.count_nonzero(inside, axis=1)
+            return result
+        to_centre = centre - self.origin
+        distance = np.linalg.norm(to_centre, axis=1)
+        enclosing = distance <= radius  # the light inside the caster's bounds: every point
+        result[enclosing] = self.n
+        cone = np.flatnonzero(~enclosing)
+        if len(cone) == 0:
+            return result
+        axis = (to_centre[cone] / distance[cone, None]).astype(np.float32)
+        cos_cone = np.sqrt(np.maximum(1.0 - (radius[cone] / distance[cone]) ** 2, 0.0)).astype(np.float32)
+        nearest = (distance[cone] - radius[cone]).astype(np.float32)
+        for first in range(0, len(cone), step):
+            part = slice(first, first + step)
+            inside = ((axis[part] @ coords[:, :3].T) >= cos_cone[part, None]) & \
+                (coords[None, :, 3] > nearest[part, None])
+            result[cone[part]] = np.count_nonzero(inside, axis=1)
+        return result
 
     def region(self, bounds) -> np.ndarray:
         self.queries += 1
@@ -274,6 +344,49 @@ class TiledShadowRegions:
             # Unknown bounds (a NaN or infinite point in the group): its points are tested.
             reached |= ~np.isfinite(chunk_radius)
         return reached
+
+    def counts(self, bounds_list, chunk: int = 1 << 18) -> np.ndarray:
+        """(C,) int64: how many points each caster's region holds, ``count_nonzero(region(b))``
+        for every ``b`` of ``bounds_list`` at once (casters by points, in blocks of about
+        ``chunk`` tests: a frame's footprint sub-sample against all its casters in a few numpy
+        calls instead of a few per caster)."""
+        if not len(bounds_list) or self.n == 0:
+            return np.zeros(len(bounds_list), np.int64)
+        low = np.array([b[0] for b in bounds_list], np.float64).reshape(-1, 3)
+        high = np.array([b[1] for b in bounds_list], np.float64).reshape(-1, 3)
+        centre = (low + high) / 2.0
+        radius = 0.5 * np.linalg.norm(high - low, axis=1) + 1e-6
+        result = np.zeros(len(centre), np.int64)
+        step = max(1, int(chunk) // self.n)
+        coords = self.coords
+        if self.sun:
+            light_space = centre @ self.basis.T  # (C, 3): u, v across, w along
+            cu, cv = light_space[:, 0].astype(np.float32), light_space[:, 1].astype(np.float32)
+            reach = (radius * radius).astype(np.float32)
+            downstream = (light_space[:, 2] - radius).astype(np.float32)
+            for first in range(0, len(centre), step):
+                part = slice(first, first + step)
+                du = coords[None, :, 0] - cu[part, None]
+                dv = coords[None, :, 1] - cv[part, None]
+                inside = (du * du + dv * dv <= reach[part, None]) & (coords[None, :, 2] > downstream[part, None])
+                result[part] = np.count_nonzero(inside, axis=1)
+            return result
+        to_centre = centre - self.origin
+        distance = np.linalg.norm(to_centre, axis=1)
+        enclosing = distance <= radius  # the light inside the caster's bounds: every point
+        result[enclosing] = self.n
+        cone = np.flatnonzero(~enclosing)
+        if len(cone) == 0:
+            return result
+        axis = (to_centre[cone] / distance[cone, None]).astype(np.float32)
+        cos_cone = np.sqrt(np.maximum(1.0 - (radius[cone] / distance[cone]) ** 2, 0.0)).astype(np.float32)
+        nearest = (distance[cone] - radius[cone]).astype(np.float32)
+        for first in range(0, len(cone), step):
+            part = slice(first, first + step)
+            inside = ((axis[part] @ coords[:, :3].T) >= cos_cone[part, None]) & \
+                (coords[None, :, 3] > nearest[part, None])
+            result[cone[part]] = np.count_nonzero(inside, axis=1)
+        return result
 
     def region(self, bounds) -> np.ndarray:
         self.queries += 1

@@ -201,3 +201,51 @@ def test_a_frame_without_traced_shadows_gathers_only_its_traced_elements_pixels(
     whole, _, _ = render(mirror_scene("RAYTRACE", lights=False))
     assert whole.stats["reflection_rays"] == subset.stats["reflection_rays"]
     np.testing.assert_array_equal(whole.passes.combined, subset.passes.combined)
+
+
+def test_a_frame_without_traced_shadows_reads_back_only_its_elements_rectangle(monkeypatch):
+    """Without traced shadows the layers are read back in the rectangle the traced elements'
+    bounds project to (the raster half clears the rest, as the GPU's read of a rectangle does):
+    smaller than the frame, holding every pixel of the mirror, and the frame is the same, pixel for
+    pixel, as one read whole."""
+    rects = []
+    read = ReferenceRaster.gbuffer
+    monkeypatch.setattr(ReferenceRaster, "gbuffer", lambda self, rect=None: rects.append(rect) or read(self, rect))
+    cropped, gbuffer, _ = render(mirror_scene("RAYTRACE", lights=False))
+    x, y, w, h = rects[-1]
+    assert 0 < w * h < 0.6 * WIDTH * HEIGHT
+    rows, columns = np.nonzero(gbuffer.opaque.element == 0)
+    assert len(rows) > 100
+    assert rows.min() >= y and rows.max() < y + h and columns.min() >= x and columns.max() < x + w
+    renderer = FrameRenderer(threads=1)
+    renderer.crop_readback = False
+    whole, _, _ = render(mirror_scene("RAYTRACE", lights=False), renderer)
+    assert rects[-1] is None
+    assert whole.stats["reflection_rays"] == cropped.stats["reflection_rays"] > 0
+    np.testing.assert_array_equal(whole.passes.combined, cropped.passes.combined)
+
+
+def test_screen_rect_holds_the_projection_of_every_point_of_its_boxes():
+    from phrt.phrt_addon.raster.gbuffer import screen_rect
+    view = camera((0.0, -8.0, 2.0), (0.0, 0.0, 0.5))
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        centre = rng.uniform(-2.0, 2.0, size=3) + np.array([0.0, 0.0, 1.0])
+        half = rng.uniform(0.02, 0.6, size=3)
+        boxes = [(centre - half, centre + half)]
+        rect = screen_rect(view, boxes, WIDTH, HEIGHT)
+        points = rng.uniform(centre - half, centre + half, size=(400, 3))
+        clip = np.c_[points, np.ones(len(points))] @ (view.projection @ view.view_matrix).T
+        ndc = clip[:, :2] / clip[:, 3:4]
+        columns = np.floor((ndc[:, 0] + 1) * 0.5 * WIDTH)
+        rows = np.floor((ndc[:, 1] + 1) * 0.5 * HEIGHT)
+        on_screen = (columns >= 0) & (columns < WIDTH) & (rows >= 0) & (rows < HEIGHT)
+        if rect is None:  # only a rectangle too large to be worth it is refused here
+            assert np.ptp(columns) * np.ptp(rows) > 0.3 * WIDTH * HEIGHT
+            continue
+        x, y, w, h = rect
+        assert np.all((columns[on_screen] >= x) & (columns[on_screen] < x + w))
+        assert np.all((rows[on_screen] >= y) & (rows[on_screen] < y + h))
+    # A box reaching behind the camera projects without bound: read the frame whole.
+    assert screen_rect(view, [(np.array([-1.0, -9.0, 1.0]), np.array([1.0, -7.0, 3.0]))], WIDTH, HEIGHT) is None
+    assert screen_rect(view, [], WIDTH, HEIGHT) is None

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.trace.shadow_region import PointChunks, ShadowRegionIndex, TiledShadowRegions, shadow_region
+from phrt.phrt_addon.trace.shadow_region import (ElementBounds, PointChunks, ShadowRegionIndex, TiledShadowRegions,
+                                               shadow_region)
 from phrt.phrt_addon.scene.snapshot import Light
 
 LIGHTS = {
@@ -89,3 +90,61 @@ def test_a_tiled_index_over_few_points_and_no_points():
         expected = shadow_region(light, bounds, points)
     np.testing.assert_array_equal(TiledShadowRegions(light, points, PointChunks(points, size=2)).region(bounds),
                                   expected)
+
+
+@pytest.mark.parametrize("kind", sorted(LIGHTS))
+def test_counts_of_all_casters_at_once_match_each_region(kind):
+    """The frame's footprints: every caster's region counted in one call, the same counts as one
+    region at a time (blocks of casters small enough to take several)."""
+    rng = np.random.default_rng(11)
+    points = rng.uniform(-10, 10, size=(3000, 3)) * np.array([1.0, 1.0, 0.2])
+    light = LIGHTS[kind]
+    bounds = []
+    for _ in range(25):
+        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.0])
+        half = rng.uniform(0.05, 1.5, size=3)
+        bounds.append((centre - half, centre + half))
+    if kind != "sun":  # a caster around the light: every point
+        bounds.append((np.array(light.position) - 1.0, np.array(light.position) + 1.0))
+    one_by_one = np.array([np.count_nonzero(ShadowRegionIndex(light, points)._test(
+        ShadowRegionIndex(light, points).coords, b)) for b in bounds])
+    counts = ShadowRegionIndex(light, points).counts(bounds, chunk=4 * len(points))
+    # float32 light-space coordinates: a point within rounding of a cone's boundary may differ
+    assert np.abs(counts - one_by_one).max() <= 1
+    assert np.count_nonzero(counts != one_by_one) <= 2
+    assert one_by_one.sum() > 500  # the casters do shadow something
+    assert ShadowRegionIndex(light, points[:0]).counts(bounds).tolist() == [0] * len(bounds)
+    assert ShadowRegionIndex(light, points).counts([]).shape == (0,)
+
+
+def test_element_bounds_follow_a_moved_mesh_and_match_its_world_vertices():
+    """World bounds are kept per (geometry, matrix): the same frame again gives the same boxes,
+    a mesh moved by its matrix gets new ones, and each box holds exactly its element's
+    vertices' world extent (up to rotation: the box of the local box's corners)."""
+    from types import SimpleNamespace
+
+    from phrt.phrt_addon.scene.snapshot import MeshInstance
+    rng = np.random.default_rng(5)
+    positions = rng.uniform(-1, 1, size=(30, 3)).astype(np.float32)
+    triangles = np.arange(30, dtype=np.int32).reshape(10, 3)
+    tri_element = np.array([0] * 5 + [2] * 5, np.int32)
+    mesh = MeshInstance("m", np.eye(4), positions, triangles, np.zeros((30, 3), np.float32), None,
+                        np.zeros(10, np.int32), tri_element)
+    snapshot = SimpleNamespace(meshes=[mesh], elements=[None] * 3)
+    bounds = ElementBounds()
+    first = bounds(snapshot)
+    assert first[1] is None
+    for element in (0, 2):
+        vertices = positions[triangles[tri_element == element]].reshape(-1, 3)
+        np.testing.assert_allclose(first[element][0], vertices.min(axis=0), rtol=0, atol=1e-6)
+        np.testing.assert_allclose(first[element][1], vertices.max(axis=0), rtol=0, atol=1e-6)
+    again = bounds(snapshot)
+    assert all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) for a, b in zip(first[::2], again[::2]))
+    moved = np.eye(4)
+    moved[:3, 3] = (10.0, -2.0, 0.5)
+    mesh.matrix_world = moved
+    shifted = bounds(snapshot)
+    np.testing.assert_allclose(shifted[0][0], first[0][0] + moved[:3, 3], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(shifted[2][1], first[2][1] + moved[:3, 3], rtol=0, atol=1e-9)
+    with pytest.raises(ValueError):  # the kept boxes are shared between frames: read-only
+        shifted[0][0][0] = 0.0

@@ -427,3 +427,34 @@ def test_a_light_without_shadows_lights_as_the_reference_does():
     bpy.data.objects["Spot"].data.use_shadow = False
     gpu_image, reference, gbuffer = gpu_and_reference(scene)
     assert_parity(gpu_image, reference, gbuffer)
+
+
+def test_a_rectangle_of_the_layers_reads_back_as_the_same_pixels_of_the_whole():
+    """``GPUFrame.gbuffer(rect)`` (a frame tracing reflections and refractions only): inside the
+    rectangle every layer's pixels equal the whole read-back's, outside they read as cleared
+    ones; the core's ``GBufferLayer.cropped`` (the reference raster's) is the same thing."""
+    scene = lit_scene()
+    rect = (23, 17, 61, 40)  # x, y, w, h: row 0 at the bottom, off the frame's edges
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        whole_frame = GPUFrame(snapshot)
+        whole_frame.draw()
+        whole = whole_frame.gbuffer()
+        part_frame = GPUFrame(snapshot)
+        part_frame.draw()
+        return whole, part_frame.gbuffer(rect), part_frame.gbuffer(rect) is part_frame.gbuffer(rect)
+
+    whole, part, kept = run_on_gpu(scene, job)
+    assert kept  # the same rectangle again: the kept read-back
+    x, y, w, h = rect
+    inside = np.zeros((HEIGHT, WIDTH), bool)
+    inside[y:y + h, x:x + w] = True
+    for name in ("opaque", "transparent"):
+        full, cut = getattr(whole, name), getattr(part, name)
+        expected = full.cropped(rect)
+        assert full.covered[inside].sum() > (0.5 * inside.sum() if name == "opaque" else 10)  # it holds surfaces
+        assert full.covered[~inside].any()  # and there are some outside it to leave out
+        assert not cut.covered[~inside].any() and (cut.element[~inside] == -1).all()
+        for field in ("covered", "position", "normal", "roughness", "material", "element"):
+            np.testing.assert_array_equal(getattr(cut, field), getattr(expected, field), err_msg=f"{name}.{field}")
