@@ -111,11 +111,11 @@ class FrameRenderer:
             and not use_benefit
 
         def read_layers(elements=None):  # with elements: only the rectangle their bounds project to
-            gbuffer = raster.gbuffer(None if elements is None or not self.crop_readback else screen_rect(
-                snapshot.camera, [element_bounds[i] for i in np.flatnonzero(elements[:-1])], raster.width, raster.height))
-            return {"opaque": LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials, elements),
-                    "transparent": LayerPixels(gbuffer.transparent, gbuffer.origin, snapshot.camera, materials,
-                                               elements)}
+            rect = None if elements is None or not self.crop_readback else screen_rect(
+                snapshot.camera, [element_bounds[i] for i in np.flatnonzero(elements[:-1])], raster.width, raster.height)
+            gbuffer = raster.gbuffer(rect)
+            return {name: LayerPixels(getattr(gbuffer, name), gbuffer.origin, snapshot.camera, materials, elements, rect)
+                    for name in ("opaque", "transparent")}
 
         # The benefit priors read the materials under each element's pixels: under BENEFIT only when an
         # item visible now has no prior yet, or the cached ones are PRIOR_EVERY frames old (a frame

@@ -83,14 +83,19 @@ class LayerPixels:
     and refractions only casts rays from its chosen elements' own pixels; gathering every
     covered pixel cost 1.5 ms a layer at 320x240)."""
 
-    def __init__(self, layer, origin, camera, materials: shading.MaterialTable, elements=None):
+    def __init__(self, layer, origin, camera, materials: shading.MaterialTable, elements=None, rect=None):
         self.layer = layer
-        covered = layer.covered.ravel()
+        height, width = layer.covered.shape
+        x, y, w, h = (0, 0, width, height) if rect is None else rect
+        # ``rect`` (x, y, w, h): only pixels inside it are gathered (the read-back's rectangle).
+        covered = layer.covered[y:y + h, x:x + w]
         if elements is not None:
             keep = np.asarray(elements, bool)
-            ids = layer.element.ravel()
+            ids = layer.element[y:y + h, x:x + w]
             covered = covered & keep[np.where((ids >= 0) & (ids < len(keep) - 1), ids, len(keep) - 1)]
-        self.flat = np.flatnonzero(covered)
+        local = np.flatnonzero(covered)
+        # Rows of the rectangle to rows of the frame (flat indices stay ascending).
+        self.flat = local if rect is None else (local // w + y) * width + local % w + x
         self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
         self.origin = np.asarray(origin, np.float64)
         self.element = layer.element.ravel()[self.flat]

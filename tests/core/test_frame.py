@@ -217,6 +217,15 @@ def test_a_frame_without_traced_shadows_reads_back_only_its_elements_rectangle(m
     rows, columns = np.nonzero(gbuffer.opaque.element == 0)
     assert len(rows) > 100
     assert rows.min() >= y and rows.max() < y + h and columns.min() >= x and columns.max() < x + w
+    # Gathered inside the rectangle only: the same pixels, in the same order, as over the whole frame.
+    snapshot = mirror_scene("RAYTRACE", lights=False)
+    materials = shading.MaterialTable(snapshot.materials)
+    mirror_only = np.array([True, False, False])
+    inside = LayerPixels(gbuffer.opaque.cropped(rects[-1]), gbuffer.origin, snapshot.camera, materials, mirror_only,
+                         rects[-1])
+    whole_frame = LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials, mirror_only)
+    np.testing.assert_array_equal(inside.flat, whole_frame.flat)
+    np.testing.assert_array_equal(inside.position, whole_frame.position)
     renderer = FrameRenderer(threads=1)
     renderer.crop_readback = False
     whole, _, _ = render(mirror_scene("RAYTRACE", lights=False), renderer)
