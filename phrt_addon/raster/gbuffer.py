@@ -48,7 +48,6 @@ class GBufferLayer:
             element=np.full((height, width), -1, np.int32),
         )
 
-
     def cropped(self, rect) -> "GBufferLayer":
         """This layer as read back inside ``rect`` only (x, y, w, h; row 0 at the bottom): the
         other pixels as cleared ones (not covered, no material, no element), what
