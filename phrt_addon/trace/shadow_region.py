@@ -345,49 +345,6 @@ class TiledShadowRegions:
             reached |= ~np.isfinite(chunk_radius)
         return reached
 
-    def counts(self, bounds_list, chunk: int = 1 << 18) -> np.ndarray:
-        """(C,) int64: how many points each caster's region holds, ``count_nonzero(region(b))``
-        for every ``b`` of ``bounds_list`` at once (casters by points, in blocks of about
-        ``chunk`` tests: a frame's footprint sub-sample against all its casters in a few numpy
-        calls instead of a few per caster)."""
-        if not len(bounds_list) or self.n == 0:
-            return np.zeros(len(bounds_list), np.int64)
-        low = np.array([b[0] for b in bounds_list], np.float64).reshape(-1, 3)
-        high = np.array([b[1] for b in bounds_list], np.float64).reshape(-1, 3)
-        centre = (low + high) / 2.0
-        radius = 0.5 * np.linalg.norm(high - low, axis=1) + 1e-6
-        result = np.zeros(len(centre), np.int64)
-        step = max(1, int(chunk) // self.n)
-        coords = self.coords
-        if self.sun:
-            light_space = centre @ self.basis.T  # (C, 3): u, v across, w along
-            cu, cv = light_space[:, 0].astype(np.float32), light_space[:, 1].astype(np.float32)
-            reach = (radius * radius).astype(np.float32)
-            downstream = (light_space[:, 2] - radius).astype(np.float32)
-            for first in range(0, len(centre), step):
-                part = slice(first, first + step)
-                du = coords[None, :, 0] - cu[part, None]
-                dv = coords[None, :, 1] - cv[part, None]
-                inside = (du * du + dv * dv <= reach[part, None]) & (coords[None, :, 2] > downstream[part, None])
-                result[part] = np.count_nonzero(inside, axis=1)
-            return result
-        to_centre = centre - self.origin
-        distance = np.linalg.norm(to_centre, axis=1)
-        enclosing = distance <= radius  # the light inside the caster's bounds: every point
-        result[enclosing] = self.n
-        cone = np.flatnonzero(~enclosing)
-        if len(cone) == 0:
-            return result
-        axis = (to_centre[cone] / distance[cone, None]).astype(np.float32)
-        cos_cone = np.sqrt(np.maximum(1.0 - (radius[cone] / distance[cone]) ** 2, 0.0)).astype(np.float32)
-        nearest = (distance[cone] - radius[cone]).astype(np.float32)
-        for first in range(0, len(cone), step):
-            part = slice(first, first + step)
-            inside = ((axis[part] @ coords[:, :3].T) >= cos_cone[part, None]) & \
-                (coords[None, :, 3] > nearest[part, None])
-            result[cone[part]] = np.count_nonzero(inside, axis=1)
-        return result
-
     def region(self, bounds) -> np.ndarray:
         self.queries += 1
         result = np.zeros(self.n, bool)
