@@ -3,6 +3,8 @@ over a replay, and the run's stage means (what the cost model sees).
 
     .venv/bin/python tools/profile_frame.py arcade                     # RASTER, frames 200-239
     .venv/bin/python tools/profile_frame.py atrium --mode HYBRID --budget-ms 160
+    .venv/bin/python tools/profile_frame.py atrium --mode HYBRID --budget-ms 128 --selection benefit \
+        --frames 1-60 --resolution 320x240      # select_ms and readback_ms of BENEFIT
 
 A/B against another checkout: make a directory holding a link named ``phrt`` to it and put
 that directory first on PYTHONPATH (``PYTHONPATH=/tmp/base .venv/bin/python tools/...``);
@@ -31,6 +33,7 @@ def main(argv=None):
     parser.add_argument("--frames", default="200-239")
     parser.add_argument("--budget-ms", type=float, default=None)
     parser.add_argument("--resolution", default="640x480")
+    parser.add_argument("--selection", default=None, help="paper or benefit (default: the scene's)")
     args = parser.parse_args(argv)
     from phrt.cli import blender_process
     from phrt.cli import bench
@@ -64,7 +67,8 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as temp:
         with blender_process.quiet_stdout():
             result = replay.replay(scene, camera, frames, args.mode.upper(), Path(temp) / "run", images="none",
-                                   scene_label=label, budget_ms=args.budget_ms)
+                                   scene_label=label, budget_ms=args.budget_ms,
+                                   overrides={"selection": args.selection.upper()} if args.selection else None)
         rows = bench.steady_rows(result.run_dir)
     print(f"{label} {args.mode.upper()} frames {args.frames} at {width}x{height}: medians over frames 4+ "
           f"(wall / calling-thread CPU ms)")
@@ -76,6 +80,9 @@ def main(argv=None):
     print("run means (frames 2+, one-time work out):", ", ".join(
         f"{key[:-3]} {bench.column_mean(rows, key):.1f}" for key in
         ("total_ms", "wall_ms", "gbuffer_ms", "composite_ms", "select_ms", "trace_ms", "readback_ms")))
+    print("run medians (frames 2+):", ", ".join(
+        f"{key[:-3]} {statistics.median(float(row[key]) for row in rows):.1f}" for key in
+        ("total_ms", "select_ms", "trace_ms", "readback_ms")))
     totals = [row["total_ms"] for row in rows]
     if args.budget_ms:
         print(f"budget {args.budget_ms:.1f}: mean {statistics.mean(totals) / args.budget_ms:.3f}x, "

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.snapshot import box_corners
+
 # Triangles per chunk: fewer chunks cost fewer draw calls, smaller ones cull tighter.  On
 # llvmpipe, atrium/path1's G-buffer pass: 1024 and 4096 cull alike, 4096 draws less.
 CHUNK_TRIANGLES = 4096
@@ -99,9 +101,7 @@ def boxes_outside(clip_from_local, boxes) -> np.ndarray:
     if len(boxes) == 0:
         return np.zeros(0, bool)
     matrix = np.asarray(clip_from_local, dtype=np.float64)
-    # The eight corners (n, 8, 3): bit k of the corner index picks low or high on axis k.
-    pick = (np.arange(8)[:, None] >> np.arange(3)[None, :]) & 1  # (8, 3)
-    corners = np.where(pick[None, :, :] == 1, boxes[:, 1:2, :], boxes[:, 0:1, :])
+    corners = box_corners(boxes[:, 0], boxes[:, 1])  # (n, 8, 3)
     finite = np.isfinite(boxes).all(axis=(1, 2))
     corners = np.where(finite[:, None, None], corners, 0.0)
     clip = corners @ matrix[:3, :3].T + matrix[:3, 3]  # x, y, z; w below

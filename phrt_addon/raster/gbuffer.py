@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.snapshot import box_corners
+
 
 @dataclass
 class GBufferLayer:
@@ -84,9 +86,7 @@ def screen_rect(camera, boxes, width: int, height: int, pad: int = RECT_PAD):
     boxes = [box for box in boxes if box is not None]
     if not boxes:
         return None
-    low = np.array([box[0] for box in boxes], np.float64)
-    high = np.array([box[1] for box in boxes], np.float64)
-    corners = low[:, None, :] + _UNIT_CORNERS[None] * (high - low)[:, None, :]
+    corners = box_corners([box[0] for box in boxes], [box[1] for box in boxes])
     clip = np.c_[corners.reshape(-1, 3), np.ones(len(boxes) * 8)] @ (
         np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
     w = clip[:, 3]
@@ -106,9 +106,6 @@ def screen_rect(camera, boxes, width: int, height: int, pad: int = RECT_PAD):
     if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
         return None
     return x0, y0, x1 - x0, y1 - y0
-
-
-_UNIT_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
 
 
 @dataclass

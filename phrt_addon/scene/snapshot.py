@@ -235,6 +235,17 @@ def transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.asarray(points, dtype=np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
 
 
+def box_corners(low, high) -> np.ndarray:
+    """(..., 8, 3) float64 corners of the boxes ``low``/``high`` (..., 3): bit k of the corner
+    index picks low (0) or high (1) on axis k."""
+    low = np.asarray(low, dtype=np.float64)[..., None, :]
+    high = np.asarray(high, dtype=np.float64)[..., None, :]
+    return np.where(_CORNER_PICK == 1, high, low)
+
+
+_CORNER_PICK = (np.arange(8)[:, None] >> np.arange(3)[None, :]) & 1  # (8, 3)
+
+
 def normal_matrix(matrix: np.ndarray) -> np.ndarray:
     """Inverse-transpose of the upper 3x3 (normals under non-uniform scale); safe for singular matrices."""
     upper = np.asarray(matrix, dtype=np.float64)[:3, :3]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene import lights, shading
-from ..scene.snapshot import transform_points
+from ..scene.snapshot import box_corners, transform_points
 
 
 class ElementBounds:
@@ -52,8 +52,7 @@ class ElementBounds:
             if len(elements):
                 low = np.array([box[0] for box in local.values()])
                 high = np.array([box[1] for box in local.values()])
-                corners = transform_points(matrix, (low[:, None, :] + _CORNERS[None] * (high - low)[:, None, :])
-                                           .reshape(-1, 3)).reshape(len(elements), 8, 3)
+                corners = transform_points(matrix, box_corners(low, high).reshape(-1, 3)).reshape(len(elements), 8, 3)
                 cached = (elements, corners.min(axis=1), corners.max(axis=1))
                 for array in cached:  # shared by every frame's bounds: read-only
                     array.setflags(write=False)
@@ -80,10 +79,6 @@ class ElementBounds:
                     bounds[element] = (np.minimum(bounds[element][0], world_low),
                                        np.maximum(bounds[element][1], world_high))
         return bounds
-
-
-# The 8 corners of a unit box, (8, 3): 0 or 1 per axis.
-_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
 
 
 def shadow_region(light, bounds, points) -> np.ndarray:
