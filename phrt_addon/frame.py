@@ -37,7 +37,7 @@ from .select import selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
-from .raster.gbuffer import element_pixel_stats, front_points, screen_rect
+from .raster.gbuffer import PixelGrid, element_pixel_stats, front_points, screen_rect
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
@@ -66,6 +66,7 @@ class FrameRenderer:
         self.trace_stage = TraceStage(threads)
         self.frames_rendered = 0
         self.element_bounds = ElementBounds()
+        self.pixel_grid = PixelGrid()  # the pixel coordinates of element_pixel_stats, kept per size
         # The error-aware relevance's per-element estimates (phrt_addon/select/benefit.py).
         self.benefit_model = benefit.BenefitModel()
         # The BENEFIT selection's per-item estimates and margin (phrt_addon/select/benefit_selection.py).
@@ -101,7 +102,7 @@ class FrameRenderer:
         # -- element statistics; the layers are read back only if rays may be traced ----
         start = _timer()
         front = raster.front_element
-        area_px, centre_ndc, distance = element_pixel_stats(front, n_elements, raster.view_depth)
+        area_px, centre_ndc, distance = element_pixel_stats(front, n_elements, raster.view_depth, self.pixel_grid)
         select_ms = _ms(start)
         layers = None
         readback_ms = 0.0

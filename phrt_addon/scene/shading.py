@@ -58,6 +58,17 @@ class SurfaceSamples:
 
     BRDF_FIELDS = ("normal", "view", "alpha", "n_dot_v", "f0", "diffuse_color")
 
+    def repeated(self, times: int) -> "SurfaceSamples":
+        """The samples ``times`` over, one after the other, with just what ``brdf_cosine`` reads:
+        every light of a batch of hits in one call (tracer.py ``direct``)."""
+        if times == 1:
+            return self
+        part = object.__new__(SurfaceSamples)
+        for name in self.BRDF_FIELDS:
+            value = self.__dict__[name]
+            part.__dict__[name] = np.tile(value, (times,) + (1,) * (value.ndim - 1))
+        return part
+
     def subset(self, index) -> "SurfaceSamples":
         """The samples at ``index`` with just what ``brdf_cosine`` reads (precomputed terms are
         sliced, not recomputed; nothing is copied when ``index`` takes every sample)."""

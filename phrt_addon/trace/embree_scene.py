@@ -31,6 +31,7 @@ import numpy as np
 
 from ..scene import rules, shading
 from ..scene.snapshot import normal_matrix, transform_points
+from .triangle_table import TriangleTable, hit_surfaces
 
 # Rays per chunk when splitting over threads; below this a single call is cheaper.
 PARALLEL_CHUNK = 16384
@@ -138,9 +139,16 @@ class EmbreeSet:
             TriangleMesh(self.scene, geometry.vertices, geometry.triangles)
             self.geometries.append(geometry)
         self.empty = not self.geometries
+        self._table = None
         if not self.empty:
             # Commit now (embreex commits on the first run) so the build is timed as upload.
             self.scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
+
+    def table(self) -> "TriangleTable":
+        """Every geometry's triangles in one table (built on the first hit shaded)."""
+        if self._table is None:
+            self._table = TriangleTable(self.geometries)
+        return self._table
 
     def local(self, origins):
         """Trace-frame ray origins (float64) in this set's frame, as Embree's float32."""
@@ -362,38 +370,8 @@ class TraceScene:
         best["sets"] = sets
         return best
 
-    def hit_surfaces(self, hits, mask):
+    @staticmethod
+    def hit_surfaces(hits, mask):
         """Shading attributes of the hits selected by ``mask``: indices, material, element, shading
         and geometric normals (unit, outward as authored), uv and the set index of each hit."""
-        indices = np.flatnonzero(mask)
-        material = np.zeros(len(indices), np.int64)
-        element = np.full(len(indices), -1, np.int64)
-        normal = np.zeros((len(indices), 3))
-        uv = np.zeros((len(indices), 2))
-        sets = hits["sets"]
-        set_index = hits["set"][indices]
-        geom_index = hits["geom"][indices]
-        prim = hits["prim"][indices]
-        u = hits["u"][indices].astype(np.float64)
-        v = hits["v"][indices].astype(np.float64)
-        barycentric = np.stack([1.0 - u - v, u, v], axis=1)
-        for s in np.unique(set_index):
-            embree_set = sets[s]
-            in_set = set_index == s
-            for g in np.unique(geom_index[in_set]):
-                chosen = np.flatnonzero(in_set & (geom_index == g))
-                geometry = embree_set.geometries[g]
-                triangles = prim[chosen]
-                material[chosen] = geometry.tri_material[triangles]
-                element[chosen] = geometry.tri_element[triangles]
-                corners = triangles[:, None] * 3 + np.arange(3)
-                normal[chosen] = np.einsum("nk,nkc->nc", barycentric[chosen], geometry.corner_normals[corners])
-                uv[chosen] = np.einsum("nk,nkc->nc", barycentric[chosen], geometry.corner_uvs[corners])
-        geometric = shading.normalize(hits["Ng"][indices].astype(np.float64))
-        normal = shading.normalize(normal)
-        degenerate = np.linalg.norm(normal, axis=1) < 0.5
-        normal[degenerate] = geometric[degenerate]
-        # Orient the geometric normal like the authored (outward) shading normal.
-        flip = np.sum(geometric * normal, axis=1) < 0
-        geometric[flip] *= -1.0
-        return indices, material, element, normal, geometric, uv, set_index
+        return hit_surfaces(hits, mask)

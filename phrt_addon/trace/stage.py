@@ -31,6 +31,7 @@ import numpy as np
 from ..scene import rules, shading
 from ..frame_types import TracedTerms
 from .rates import element_rates, layer_guide, reconstruct, traced_subset
+from .pixel_tiles import ImageTiles
 from .shadow_region import PointChunks, TiledShadowRegions
 
 
@@ -42,11 +43,16 @@ def _ms(start):
     return (time.perf_counter() - start) * 1000.0
 
 
-def screen_tiles(pixels, size: int = TILE_PIXELS) -> np.ndarray:
-    """The screen tile (``size`` x ``size`` pixels) of each of a layer's pixels."""
-    width = pixels.layer.covered.shape[1]
+def layer_tiles(pixels, points_world, size: int = TILE_PIXELS):
+    """A layer's points (``points_world``: ``pixels.world()``) in ``size`` x ``size`` screen
+    tiles: straight from the image when they cover at least a quarter of it (no sort: 2.3 ms
+    against 5.7 for arcade's opaque layer at 320x240), else sorted by tile (a transparent
+    layer's few pixels: 0.2 ms against 1.1 for the whole image's tiles)."""
+    height, width = pixels.layer.covered.shape
+    if 4 * len(pixels) >= height * width:
+        return ImageTiles(pixels.layer.position, pixels.flat, pixels.origin, size)
     rows, cols = np.divmod(pixels.flat, width)
-    return (rows // size) * (-(-width // size)) + cols // size
+    return PointChunks(points_world, keys=(rows // size) * (-(-width // size)) + cols // size)
 
 
 def _attribute(element_rays, elements, weights, rays):
@@ -206,9 +212,11 @@ class TraceStage:
             np.maximum.at(effect_rate[effect], flat, np.broadcast_to(pixel_rate, flat.shape).astype(np.float32))
             return flat, values
 
-        def ray_start(pixels, idx, view_dirs):
-            """Trace-frame points, their geometric normals facing the camera and ray offsets."""
-            points_trace = scene.to_trace(pixels.world(idx))  # only the pixels that get rays
+        def ray_start(pixels, idx, view_dirs, points_trace=None):
+            """Trace-frame points (given, or of the pixels ``idx``), their geometric normals facing
+            the camera and ray offsets."""
+            if points_trace is None:
+                points_trace = scene.to_trace(pixels.world(idx))  # only the pixels that get rays
             normal = pixels.geometric_normals(idx, view_dirs)
             eps = scene.epsilon(points_trace, pixels.camera_distance(idx), element=pixels.element[idx])
             return points_trace, normal, eps
@@ -225,9 +233,9 @@ class TraceStage:
                 if not light.cast_shadows:
                     continue
                 setup_start = time.perf_counter()
-                if points_world is None:
+                if points_world is None:  # the layer's points in screen tiles, shared by its lights
                     points_world = pixels.world()
-                    chunks = PointChunks(points_world, keys=screen_tiles(pixels))  # shared by the layer's lights
+                    chunks = layer_tiles(pixels, points_world)
                 index = TiledShadowRegions(light, points_world, chunks)
                 region = np.zeros(len(pixels), bool)
                 caster_regions = []
@@ -239,10 +247,12 @@ class TraceStage:
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:
                     continue
-                direction, _, _ = shading.light_incidence(light, scene.to_trace(points_world[idx]), scene.origin)
+                points_trace = scene.to_trace(points_world[idx])
+                direction, _, _ = shading.light_incidence(light, points_trace, scene.origin)
                 view_dirs = pixels.view_directions(idx)
                 facing = shading.dot(pixels.normals(idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
-                idx, direction, view_dirs = idx[facing], direction[facing], view_dirs[facing]
+                idx, direction, view_dirs, points_trace = idx[facing], direction[facing], view_dirs[facing], \
+                    points_trace[facing]
                 if len(idx) == 0:
                     continue
                 # A pixel in several casters' regions is traced at the highest of their rates.
@@ -252,7 +262,7 @@ class TraceStage:
                                           pixel_rate)
                 cast = rated(pixels, idx, pixel_rate)
                 ray_idx = idx[cast]
-                points_trace, normal, eps = ray_start(pixels, ray_idx, view_dirs[cast])
+                points_trace, normal, eps = ray_start(pixels, ray_idx, view_dirs[cast], points_trace[cast])
                 _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
                 blocked = scene.occluded(points_trace + normal * eps[:, None], direction[cast], distance - 2 * eps)
                 traced.shadow_visibility[(layer_name, light_index)] = filled(

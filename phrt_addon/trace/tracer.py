@@ -93,17 +93,29 @@ class RadianceTracer:
         if eps is None:
             eps = self.scene.epsilon(points_trace, view_distance)
         offset_normal = surface.normal if offset_normal is None else offset_normal
-        for light in self.snapshot.lights:
-            direction, distance, irradiance = shading.light_incidence(light, points_trace, origin_world)
-            contribution = shading.brdf_cosine(surface, direction) * irradiance
-            lit = np.any(contribution > 0, axis=1)
-            if light.cast_shadows and np.any(lit):
-                idx = np.flatnonzero(lit)
-                start = points_trace[idx] + offset_normal[idx] * eps[idx, None]
-                blocked = self.scene.occluded(start, direction[idx], distance[idx] - 2 * eps[idx])
-                self.shadow_rays += len(idx)
-                contribution[idx[blocked]] = 0.0
-            total += contribution
+        lights = self.snapshot.lights
+        if not lights:
+            return total
+        # Every light at once: one BRDF evaluation and one shadow query over (light, point)
+        # pairs, light after light.  Per light, a bounce level of a few rays cost 0.6 ms in
+        # numpy and Embree calls (arcade's 5 lights, 7 levels: 70 ms for 349 reflection rays).
+        n = len(points_trace)
+        incidence = [shading.light_incidence(light, points_trace, origin_world) for light in lights]
+        direction = np.concatenate([d for d, _, _ in incidence])
+        distance = np.concatenate([d for _, d, _ in incidence])
+        contribution = shading.brdf_cosine(surface.repeated(len(lights)), direction) \
+            * np.concatenate([e for _, _, e in incidence])
+        casts = np.repeat(np.array([light.cast_shadows for light in lights], bool), n)
+        test = np.flatnonzero(casts & np.any(contribution > 0, axis=1))
+        if len(test):
+            point = test % n
+            start = points_trace[point] + offset_normal[point] * eps[point, None]
+            blocked = self.scene.occluded(start, direction[test], distance[test] - 2 * eps[point])
+            self.shadow_rays += len(test)
+            contribution[test[blocked]] = 0.0
+        # Summed light after light, as one light at a time added them.
+        for part in contribution.reshape(len(lights), n, 3):
+            total += part
         return total
 
     def radiance(self, origins, directions, depth, passed=0):

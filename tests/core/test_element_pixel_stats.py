@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.raster.gbuffer import element_pixel_stats
+from phrt.phrt_addon.raster.gbuffer import PixelGrid, element_pixel_stats
 
 
 def brute_force(image, n, depth):
@@ -35,3 +35,19 @@ def test_element_pixel_stats_match_a_per_element_count(n, height, width):
     np.testing.assert_allclose(centre, expected[1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(mean_depth, expected[2], rtol=1e-9)
     assert counts.sum() == np.count_nonzero((image >= 0) & (image < n))
+
+
+def test_a_kept_grid_gives_the_same_statistics_as_a_new_one_at_every_size():
+    """The grid a replay keeps follows the frame size (a kept grid of another size would put
+    every centroid elsewhere)."""
+    grid = PixelGrid()
+    rng = np.random.default_rng(3)
+    for height, width in [(48, 64), (48, 64), (30, 80), (48, 64)]:
+        image = rng.integers(-2, 9, size=(height, width))
+        depth = rng.uniform(0.5, 50.0, size=(height, width)).astype(np.float32)
+        kept = element_pixel_stats(image, 8, depth, grid)
+        fresh = brute_force(image, 8, depth)
+        assert np.array_equal(kept[0], fresh[0])
+        np.testing.assert_allclose(kept[1], fresh[1], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(kept[2], fresh[2], rtol=1e-9)
+    assert not grid.coordinates(48, 64)[0].flags.writeable
