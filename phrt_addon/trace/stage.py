@@ -72,6 +72,21 @@ def _attribute_to_pixels(element_rays, pixel_element, rays):
 EFFECTS = ("shadows", "reflections", "refractions")
 
 
+@dataclass
+class _Bounce:
+    """One part of a frame's batch of bounce rays: an effect's rays from one layer."""
+    effect: str  # "reflections" or "refractions"
+    layer_name: str
+    pixels: object  # LayerPixels
+    wanted_idx: np.ndarray  # the layer's pixels wanting the effect
+    cast: np.ndarray  # of those, the ones cast this frame (rates)
+    ray_element: np.ndarray  # the element of each cast ray's pixel
+    pixel_rate: np.ndarray
+    origins: np.ndarray
+    directions: np.ndarray
+    blend: np.ndarray | None  # reflections: the traced share of each ray's colour
+
+
 def traced_effects(elements, selected, effects=None) -> dict[str, np.ndarray]:
     """Per effect, the elements whose effect is traced: selected, tagged for it, and (when
     ``effects`` names the effect) chosen for it."""
@@ -154,6 +169,48 @@ class TraceStage:
                 self._textures.clear()
             entry = self._textures[id(texture)] = (texture, rules.prepare_texture(texture))
         return entry[1]
+
+    @staticmethod
+    def _trace_bounces(parts, tracer, scene, traced, filled, item_rays, counters, prepare_ms, world):
+        """Trace every ``_Bounce`` part in one ``radiance`` call; fill ``traced`` and the
+        reflection and refraction counters (the call's time and Embree time shared by rays)."""
+        start = time.perf_counter()
+        embree_before = scene.stats["embree_ms"]
+        tracer.batch_rays = np.zeros(len(parts))
+        radiance = tracer.radiance(
+            np.concatenate([part.origins for part in parts]) if parts else np.zeros((0, 3)),
+            np.concatenate([part.directions for part in parts]) if parts else np.zeros((0, 3)), 1,
+            batch=np.concatenate([np.full(len(part.origins), k) for k, part in enumerate(parts)]) if parts
+            else np.zeros(0, np.int64))
+        bounce_ms, bounce_embree_ms = _ms(start), scene.stats["embree_ms"] - embree_before
+        rays = tracer.batch_rays[:len(parts)]
+        # Each effect's share of the batch: its rays (or, with none cast at all, its parts).
+        weight = rays if rays.sum() > 0 else np.ones(len(parts))
+        ms = dict(prepare_ms)
+        effect_rays = {"reflections": 0, "refractions": 0}
+        effect_share = {"reflections": 0.0, "refractions": 0.0}
+        first = 0
+        for k, part in enumerate(parts):
+            begin = time.perf_counter()
+            colour = radiance[first:first + len(part.origins)]
+            first += len(part.origins)
+            if part.effect == "reflections":
+                traced.reflection[part.layer_name] = filled(
+                    "reflections", part.layer_name, part.pixels, part.wanted_idx, part.cast,
+                    part.blend * colour + (1.0 - part.blend) * world, part.pixel_rate)
+            else:
+                traced.refraction = filled("refractions", part.layer_name, part.pixels, part.wanted_idx, part.cast,
+                                           colour, part.pixel_rate)
+            column = EFFECTS.index(part.effect)
+            _attribute_to_pixels(item_rays[:, column], part.ray_element, float(rays[k]))
+            effect_rays[part.effect] += int(rays[k])
+            effect_share[part.effect] += float(weight[k] / weight.sum())
+            ms[part.effect] += _ms(begin)
+        counters.reflection_rays, counters.refraction_rays = effect_rays["reflections"], effect_rays["refractions"]
+        counters.reflection_ms = ms["reflections"] + bounce_ms * effect_share["reflections"]
+        counters.refraction_ms = ms["refractions"] + bounce_ms * effect_share["refractions"]
+        counters.reflection_embree_ms = bounce_embree_ms * effect_share["reflections"]
+        counters.refraction_embree_ms = bounce_embree_ms * effect_share["refractions"]
 
     def run(self, snapshot, layers, materials, selected, element_bounds, effects=None, rates=None) -> TraceResult:
         """Trace the selected elements' effects from the read-back ``layers``.
@@ -274,13 +331,19 @@ class TraceStage:
                 _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region
                                                    in caster_regions], len(ray_idx))
         counters.shadow_ms = _ms(start)
-        counters.shadow_embree_ms, embree_before = scene.stats["embree_ms"] - embree_before, scene.stats["embree_ms"]
+        counters.shadow_embree_ms = scene.stats["embree_ms"] - embree_before
         # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
         bounces = int(snapshot.settings.max_bounces) >= 1
 
-        # Reflections on selected elements' pixels (mirror direction, blended by roughness).
+        # Reflections (on selected elements' pixels, the mirror direction blended by roughness)
+        # and refractions (through selected transparent elements, transparent layer only) leave
+        # as one batch of rays: a bounce level's numpy and Embree calls are paid once, not once
+        # per layer and effect (a glass ball's reflection and refraction were two recursions
+        # of 5-7 levels).  Each part keeps count of the rays its paths cast; the batch's time is
+        # shared between the effects in proportion to them.
+        parts = []
+        prepare_ms = {"reflections": 0.0, "refractions": 0.0}
         start = time.perf_counter()
-        rays_before = tracer.rays + tracer.shadow_rays
         reflecting = np.r_[wanted_effects["reflections"], False]
         for layer_name, pixels in layers.items():
             if not bounces or len(pixels) == 0:
@@ -296,19 +359,11 @@ class TraceStage:
             view_dirs = pixels.view_directions(idx)
             points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
             direction = leave_surface(shading.reflect(view_dirs, pixels.normals(idx, view_dirs)), normal)
-            layer_rays_before = tracer.rays + tracer.shadow_rays
-            radiance = tracer.radiance(points_trace + normal * eps[:, None], direction, 1)
-            blend = reflection_blend(pixels.roughness[idx])[:, None]
-            traced.reflection[layer_name] = filled("reflections", layer_name, pixels, wanted_idx, cast,
-                                                   blend * radiance + (1.0 - blend) * world, pixel_rate)
-            _attribute_to_pixels(item_rays[:, 1], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
-        counters.reflection_rays = tracer.rays + tracer.shadow_rays - rays_before
-        counters.reflection_ms = _ms(start)
-        counters.reflection_embree_ms, embree_before = scene.stats["embree_ms"] - embree_before, scene.stats["embree_ms"]
-
-        # Refractions through selected transparent elements (transparent layer only).
+            parts.append(_Bounce("reflections", layer_name, pixels, wanted_idx, cast, element_of[idx], pixel_rate,
+                                 points_trace + normal * eps[:, None], direction,
+                                 reflection_blend(pixels.roughness[idx])[:, None]))
+        prepare_ms["reflections"] = _ms(start)
         start = time.perf_counter()
-        rays_before = tracer.rays + tracer.shadow_rays
         pixels = layers["transparent"]
         if bounces and len(pixels):
             refracting = np.r_[wanted_effects["refractions"], False]
@@ -324,14 +379,10 @@ class TraceStage:
                 ior = materials.ior[pixels.material[idx]]
                 direction, _ = shading.refract(view_dirs, pixels.normals(idx, view_dirs), 1.0 / ior)
                 direction = leave_surface(direction, normal, side=-1.0)
-                layer_rays_before = tracer.rays + tracer.shadow_rays
-                radiance = tracer.radiance(points_trace - normal * eps[:, None], direction, 1)
-                traced.refraction = filled("refractions", "transparent", pixels, wanted_idx, cast, radiance,
-                                           pixel_rate)
-                _attribute_to_pixels(item_rays[:, 2], element_of[idx], tracer.rays + tracer.shadow_rays - layer_rays_before)
-        counters.refraction_rays = tracer.rays + tracer.shadow_rays - rays_before
-        counters.refraction_ms = _ms(start)
-        counters.refraction_embree_ms = scene.stats["embree_ms"] - embree_before
+                parts.append(_Bounce("refractions", "transparent", pixels, wanted_idx, cast, element_of[idx],
+                                     pixel_rate, points_trace - normal * eps[:, None], direction, None))
+        prepare_ms["refractions"] = _ms(start)
+        self._trace_bounces(parts, tracer, scene, traced, filled, item_rays, counters, prepare_ms, world)
         effect_rate = {effect: image.reshape(height, width) for effect, image in effect_rate.items()}
         return TraceResult(traced=traced, counters=counters, element_rays=item_rays.sum(axis=1), item_rays=item_rays,
                            rate=np.maximum.reduce(list(effect_rate.values())), effect_rate=effect_rate)

@@ -70,6 +70,16 @@ class RadianceTracer:
         self.max_bounces = max(int(snapshot.settings.max_bounces), 0)
         self.rays = 0
         self.shadow_rays = 0
+        # Rays and shadow rays per batch label (``radiance(..., batch=)``): what each of several
+        # batches traced in one call cost, through every bounce.
+        self.batch_rays = np.zeros(0)
+
+    def _count(self, batch, rays=None):
+        """Add the rays of ``batch`` labels (one per ray) to ``batch_rays``."""
+        counts = np.bincount(batch if rays is None else batch[rays])
+        if len(counts) > len(self.batch_rays):
+            self.batch_rays = np.r_[self.batch_rays, np.zeros(len(counts) - len(self.batch_rays))]
+        self.batch_rays[:len(counts)] += counts
 
     def _albedo(self, material, uv):
         albedo = self.materials.base_color[material].copy()
@@ -82,10 +92,11 @@ class RadianceTracer:
         return albedo
 
     def direct(self, points_trace, surface: shading.SurfaceSamples, view_distance=None, offset_normal=None,
-               eps=None):
+               eps=None, batch=None):
         """Direct light with traced shadows at trace-frame points.  Shadow rays start ``eps``
         (default: ``TraceScene.epsilon`` with ``view_distance``) along ``offset_normal`` (the
-        geometric normal on the lit side; default: the shading normal)."""
+        geometric normal on the lit side; default: the shading normal).  ``batch``: a label per
+        point, its shadow rays counted in ``batch_rays``."""
         total = np.zeros((len(points_trace), 3))
         if len(points_trace) == 0:
             return total
@@ -112,16 +123,19 @@ class RadianceTracer:
             start = points_trace[point] + offset_normal[point] * eps[point, None]
             blocked = self.scene.occluded(start, direction[test], distance[test] - 2 * eps[point])
             self.shadow_rays += len(test)
+            if batch is not None:
+                self._count(batch, point)
             contribution[test[blocked]] = 0.0
         # Summed light after light, as one light at a time added them.
         for part in contribution.reshape(len(lights), n, 3):
             total += part
         return total
 
-    def radiance(self, origins, directions, depth, passed=0):
+    def radiance(self, origins, directions, depth, passed=0, batch=None):
         """Radiance arriving along trace-frame rays (N,3).  ``depth``: the bounces this ray has
         taken (0 for a camera ray, 1 for a ray leaving the G-buffer), a number or one per ray;
-        ``passed``: the surfaces its path has passed straight through."""
+        ``passed``: the surfaces its path has passed straight through; ``batch`` (optional): a
+        label per ray (small ints), every ray its path casts counted in ``batch_rays``."""
         n = len(origins)
         depth = np.broadcast_to(np.asarray(depth, dtype=np.float64), (n,))
         passed = np.broadcast_to(np.asarray(passed, dtype=np.int64), (n,))
@@ -131,6 +145,9 @@ class RadianceTracer:
         origins = np.asarray(origins, dtype=np.float64)
         directions = shading.normalize(np.nan_to_num(np.asarray(directions, dtype=np.float64)))
         self.rays += n
+        if batch is not None:
+            batch = np.broadcast_to(np.asarray(batch, dtype=np.int64), (n,))
+            self._count(batch)
         hits = self.scene.intersect(origins, directions)
         hit_mask = np.isfinite(hits["t"]) & (hits["geom"] >= 0)
         if not np.any(hit_mask):
@@ -154,7 +171,8 @@ class RadianceTracer:
             transmission=m.transmission[material], ior=m.ior[material], emission=m.emission[material])
         travelled = hits["t"][idx]
         eps = self.scene.epsilon(points, travelled, set_index=set_index)
-        color = surface.emission + self.direct(points, surface, offset_normal=geometric_facing, eps=eps)
+        batch = None if batch is None else batch[idx]
+        color = surface.emission + self.direct(points, surface, offset_normal=geometric_facing, eps=eps, batch=batch)
         diffuse_ambient, env_fresnel = shading.ambient(surface, self.world)
         color += diffuse_ambient
         transmissive = m.transmissive[material]
@@ -199,7 +217,8 @@ class RadianceTracer:
                             points[s] - geometric_facing[s] * eps[s, None]]),
             np.concatenate([reflect_direction, refract_direction, dirs[s]]),
             np.concatenate([next_depth[r], next_depth[t], depth[s]]),
-            np.concatenate([passed[r], passed[t], passed[s] + 1]))
+            np.concatenate([passed[r], passed[t], passed[s] + 1]),
+            None if batch is None else np.concatenate([batch[r], batch[t], batch[s]]))
         traced, through, passing = np.split(secondary, [len(r), len(r) + len(t)])
 
         reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
