@@ -306,8 +306,9 @@ class DaskExecutor:
 
     def close(self):
         if self.cluster is not None and self.client is not None:
-            # Workers first: one whose heartbeat finds the scheduler closed logs an ERROR (loaded machine).
+            # Workers first, their shutdown's heartbeat ERRORs quietened (a loaded machine logs them).
             try:
+                self.client.run(lambda: logging.getLogger("distributed.worker").setLevel(logging.CRITICAL))
                 self.cluster.scale(0)
                 deadline = time.monotonic() + CLOSE_TIMEOUT_S
                 while self.client.scheduler_info(n_workers=-1)["workers"] and time.monotonic() < deadline:
