@@ -1,0 +1,115 @@
+"""The trace stage of this checkout against another one's on the same frames, in one process:
+frames captured from a BENEFIT replay (the largest of each mix of traced effects), each traced
+alternately by both stages; prints the median ms of each and checks that both give the same
+traced values and ray counts.
+
+    .venv/bin/python tools/trace_ab.py arcade --old /path/to/other/checkout [--budget-ms 200]
+        [--frames 1-60] [--resolution 320x240] [--repeats 12]
+
+Only ``phrt_addon`` of the other checkout is imported (as ``phrt_old``): its stage must take
+this checkout's ``LayerPixels`` and snapshots (true of the trace stage since 203265f)."""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def capture(args):
+    """{mix of traced effects: (args, kwargs, rays)} of the frames with the most rays."""
+    from phrt.cli import blender_process
+    from phrt.engine.runs import camera_path, replay
+    from phrt.phrt_addon.trace import stage
+    blender_process.blender()
+    import bpy
+    label = blender_process.load_scene(args.scene)
+    scene = bpy.context.scene
+    width, height = (int(v) for v in args.resolution.lower().split("x"))
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
+    camera = camera_path.find_path(scene, None)
+    frames = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
+    captured = {}
+    run = stage.TraceStage.run
+
+    def keep(self, *a, **k):
+        result = run(self, *a, **k)
+        counters = result.counters
+        rays = (counters.shadow_rays, counters.reflection_rays, counters.refraction_rays)
+        mix = "+".join(name for name, count in zip(("shadows", "reflections", "refractions"), rays) if count)
+        if mix and (mix not in captured or sum(rays) > captured[mix][2]):
+            captured[mix] = (a, k, sum(rays))
+        return result
+
+    stage.TraceStage.run = keep
+    try:
+        with tempfile.TemporaryDirectory() as temp, blender_process.quiet_stdout():
+            replay.replay(scene, camera, frames, "HYBRID", Path(temp) / "run", images="none", scene_label=label,
+                          budget_ms=args.budget_ms, overrides={"selection": "BENEFIT"})
+    finally:
+        stage.TraceStage.run = run
+    return captured
+
+
+def same(new, old) -> bool:
+    """Both results trace the same values (to 1e-6) and count the same rays."""
+    a, b = new.traced, old.traced
+    pairs = [(a.shadow_visibility.get(key), b.shadow_visibility.get(key)) for key in
+             set(a.shadow_visibility) | set(b.shadow_visibility)]
+    pairs += [(a.reflection.get(key), b.reflection.get(key)) for key in set(a.reflection) | set(b.reflection)]
+    pairs.append((a.refraction, b.refraction))
+    for x, y in pairs:
+        if (x is None) != (y is None):
+            return False
+        if x is not None and not (np.array_equal(x[0], y[0]) and np.allclose(x[1], y[1], rtol=0, atol=1e-6)):
+            return False
+    c, d = new.counters, old.counters
+    return (c.shadow_rays, c.reflection_rays, c.refraction_rays) == (d.shadow_rays, d.reflection_rays,
+                                                                     d.refraction_rays)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scene")
+    parser.add_argument("--old", required=True, help="another checkout of this repository")
+    parser.add_argument("--budget-ms", type=float, default=200.0)
+    parser.add_argument("--frames", default="1-60")
+    parser.add_argument("--resolution", default="320x240")
+    parser.add_argument("--repeats", type=int, default=12)
+    args = parser.parse_args(argv)
+    links = Path(tempfile.mkdtemp(prefix="phrt-ab-"))
+    (links / "phrt_old").symlink_to(Path(args.old).resolve(), target_is_directory=True)
+    sys.path.insert(0, str(links))
+    from phrt_old.phrt_addon.trace import stage as old_stage
+    from phrt.phrt_addon.trace import stage as new_stage
+    captured = capture(args)
+    new, old = new_stage.TraceStage(None), old_stage.TraceStage(None)
+    print(f"{args.scene} at {args.resolution}, budget {args.budget_ms:g} ms: trace stage ms, medians of "
+          f"{args.repeats} alternate runs (this checkout / {args.old})")
+    try:
+        for mix, (a, k, rays) in sorted(captured.items()):
+            new.run(*a, **k), old.run(*a, **k)  # Embree builds, texture preparation
+            times = {"new": [], "old": []}
+            for _ in range(args.repeats):
+                for name, stage in (("new", new), ("old", old)):
+                    start = time.perf_counter()
+                    result = stage.run(*a, **k)
+                    times[name].append((time.perf_counter() - start) * 1000.0)
+                    if name == "new":
+                        new_result = result
+                    else:
+                        old_result = result
+            ratio = statistics.median(times["new"]) / statistics.median(times["old"])
+            print(f"  {mix:>32} {rays:7d} rays: {statistics.median(times['new']):7.1f} / "
+                  f"{statistics.median(times['old']):7.1f} ms = {ratio:.2f}x, "
+                  f"{'same values and rays' if same(new_result, old_result) else 'DIFFERENT values or rays'}")
+    finally:
+        new.close(), old.close()
+
+
+if __name__ == "__main__":
+    main()
