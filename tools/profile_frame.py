@@ -26,6 +26,25 @@ STEPS = (("frame", "GPUFrame.draw", "draw"), ("gbuffer", "draw", "gbuffer.draw")
          ("composite", "composite", "composite"))
 
 
+def replay_scene(scene_name, mode, frames, width, height, budget_ms=None, overrides=None, keep=None):
+    """Replay ``frames`` of a sample scene's camera path at ``width`` x ``height`` in a temporary
+    run folder; returns (scene label, ``keep(result)`` before the folder goes, or the result)."""
+    from phrt.cli import blender_process
+    from phrt.engine.runs import camera_path, replay
+    blender_process.blender()
+    import bpy
+    label = blender_process.load_scene(scene_name)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
+    camera = camera_path.find_path(scene, None)
+    frame_range = camera_path.parse_frames(frames, camera_path.path_frame_range(scene, camera))
+    with tempfile.TemporaryDirectory() as temp:
+        with blender_process.quiet_stdout():
+            result = replay.replay(scene, camera, frame_range, mode.upper(), Path(temp) / "run", images="none",
+                                   scene_label=label, budget_ms=budget_ms, overrides=overrides)
+        return label, (keep(result) if keep else result)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scene")
@@ -35,9 +54,7 @@ def main(argv=None):
     parser.add_argument("--resolution", default="640x480")
     parser.add_argument("--selection", default=None, help="paper or benefit (default: the scene's)")
     args = parser.parse_args(argv)
-    from phrt.cli import blender_process
     from phrt.cli import bench
-    from phrt.engine.runs import camera_path, replay
     timings = {}
 
     def timed(name, function):
@@ -56,20 +73,10 @@ def main(argv=None):
         for part in path:
             owner = getattr(owner, part)
         setattr(owner, name, timed(label, getattr(owner, name)))
-    blender_process.blender()
-    import bpy
-    label = blender_process.load_scene(args.scene)
-    scene = bpy.context.scene
     width, height = (int(v) for v in args.resolution.lower().split("x"))
-    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
-    camera = camera_path.find_path(scene, None)
-    frames = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
-    with tempfile.TemporaryDirectory() as temp:
-        with blender_process.quiet_stdout():
-            result = replay.replay(scene, camera, frames, args.mode.upper(), Path(temp) / "run", images="none",
-                                   scene_label=label, budget_ms=args.budget_ms,
-                                   overrides={"selection": args.selection.upper()} if args.selection else None)
-        rows = bench.steady_rows(result.run_dir)
+    label, rows = replay_scene(args.scene, args.mode, args.frames, width, height, args.budget_ms,
+                               {"selection": args.selection.upper()} if args.selection else None,
+                               keep=lambda result: bench.steady_rows(result.run_dir))
     print(f"{label} {args.mode.upper()} frames {args.frames} at {width}x{height}: medians over frames 4+ "
           f"(wall / calling-thread CPU ms)")
     for _, _, step in STEPS:

@@ -22,17 +22,8 @@ import numpy as np
 
 def capture(args):
     """{mix of traced effects: (args, kwargs, rays)} of the frames with the most rays."""
-    from phrt.cli import blender_process
-    from phrt.engine.runs import camera_path, replay
     from phrt.phrt_addon.trace import stage
-    blender_process.blender()
-    import bpy
-    label = blender_process.load_scene(args.scene)
-    scene = bpy.context.scene
-    width, height = (int(v) for v in args.resolution.lower().split("x"))
-    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
-    camera = camera_path.find_path(scene, None)
-    frames = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
+    from profile_frame import replay_scene  # tools/: the scene loaded and its path replayed
     captured = {}
     run = stage.TraceStage.run
 
@@ -46,10 +37,9 @@ def capture(args):
         return result
 
     stage.TraceStage.run = keep
+    width, height = (int(v) for v in args.resolution.lower().split("x"))
     try:
-        with tempfile.TemporaryDirectory() as temp, blender_process.quiet_stdout():
-            replay.replay(scene, camera, frames, "HYBRID", Path(temp) / "run", images="none", scene_label=label,
-                          budget_ms=args.budget_ms, overrides={"selection": "BENEFIT"})
+        replay_scene(args.scene, "HYBRID", args.frames, width, height, args.budget_ms, {"selection": "BENEFIT"})
     finally:
         stage.TraceStage.run = run
     return captured
