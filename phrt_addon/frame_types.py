@@ -81,7 +81,12 @@ class LayerPixels:
     for the subsets that get rays.  ``elements`` (optional, (n + 1,) bool over element ids, the
     last for "no element"): only the pixels of those elements (a frame that traces reflections
     and refractions only casts rays from its chosen elements' own pixels; gathering every
-    covered pixel cost 1.5 ms a layer at 320x240)."""
+    covered pixel cost 1.5 ms a layer at 320x240).
+
+    The per-pixel attributes (``position``, ``element``, ``material``, ``roughness``) are
+    gathered from the layer's images on first use, and the methods given an ``index`` gather
+    only those pixels until then: a frame tracing a few shadows reads the positions of the
+    pixels its casters may reach, not of the whole layer (3.2 ms a frame at 320x240)."""
 
     def __init__(self, layer, origin, camera, materials: shading.MaterialTable, elements=None, rect=None):
         self.layer = layer
@@ -96,31 +101,59 @@ class LayerPixels:
         local = np.flatnonzero(covered)
         # Rows of the rectangle to rows of the frame (flat indices stay ascending).
         self.flat = local if rect is None else (local // w + y) * width + local % w + x
-        self.position = layer.position.reshape(-1, 3)[self.flat]  # float32, camera-relative
         self.origin = np.asarray(origin, np.float64)
-        self.element = layer.element.ravel()[self.flat]
-        self.material = np.clip(layer.material.ravel()[self.flat], 0, len(materials.ior) - 1)
-        self.roughness = layer.roughness.ravel()[self.flat]
-        self._normal = layer.normal.reshape(-1, 3)[self.flat]
         self.camera = camera
         self.materials = materials
+        self._cache = {}
+
+    def _gathered(self, name: str, index=slice(None)) -> np.ndarray:
+        """The layer's image ``name`` at the pixels ``index`` (of ``flat``): from the whole
+        gather once made, else straight from the image (the whole gather kept)."""
+        whole = self._cache.get(name)
+        if whole is not None:
+            return whole[index]
+        image = getattr(self.layer, name)
+        values = image.reshape(image.shape[0] * image.shape[1], -1) if image.ndim == 3 else image.reshape(-1)
+        if isinstance(index, slice) and index == slice(None):
+            self._cache[name] = whole = values[self.flat]
+            return whole
+        return values[self.flat[index]]
+
+    @property
+    def position(self) -> np.ndarray:
+        """(n, 3) float32 camera-relative positions."""
+        return self._gathered("position")
+
+    @property
+    def element(self) -> np.ndarray:
+        return self._gathered("element")
+
+    @property
+    def material(self) -> np.ndarray:
+        if "material_index" not in self._cache:
+            self._cache["material_index"] = np.clip(self._gathered("material"), 0, len(self.materials.ior) - 1)
+        return self._cache["material_index"]
+
+    @property
+    def roughness(self) -> np.ndarray:
+        return self._gathered("roughness")
 
     def __len__(self):
         return len(self.flat)
 
     def world(self, index=slice(None)) -> np.ndarray:
-        return self.position[index].astype(np.float64) + self.origin
+        return self._gathered("position", index).astype(np.float64) + self.origin
 
     def view_directions(self, index=slice(None)) -> np.ndarray:
         """Unit directions from the camera (perspective) or the camera axis (orthographic)."""
-        position = self.position[index]
+        position = self._gathered("position", index)
         if self.camera.ortho:
             return np.broadcast_to(self.camera.forward.astype(np.float32), position.shape).copy()
         return shading.normalize(position)
 
     def normals(self, index=slice(None), view_directions=None) -> np.ndarray:
         """Unit shading normals facing the viewer (flipped where interpolation turned them away)."""
-        normal = shading.normalize(self._normal[index])
+        normal = shading.normalize(self._gathered("normal", index))
         if view_directions is None:
             view_directions = self.view_directions(index)
         back = shading.dot(normal, view_directions) > 0
@@ -134,5 +167,5 @@ class LayerPixels:
     def camera_distance(self, index=slice(None)) -> np.ndarray:
         """Distance from the camera: the size of the points' float32 error, which secondary-ray
         offsets must exceed (telephoto views)."""
-        position = self.position[index]
+        position = self._gathered("position", index)
         return np.sqrt(shading.dot(position, position))

@@ -1,13 +1,14 @@
 """The trace stage of this checkout against another one's on the same frames, in one process:
 frames captured from a BENEFIT replay (the largest of each mix of traced effects), each traced
-alternately by both stages; prints the median ms of each and checks that both give the same
-traced values and ray counts.
+alternately by both stages, each from its own ``LayerPixels`` made from the read-back layers
+(what the frame's trace time holds after the read-back itself); prints the median ms of each
+and checks that both give the same traced values and ray counts.
 
     .venv/bin/python tools/trace_ab.py arcade --old /path/to/other/checkout [--budget-ms 200]
-        [--frames 1-60] [--resolution 320x240] [--repeats 12]
+        [--frames 1-60] [--resolution 320x240] [--repeats 12] [--pick most|fewest]
 
 Only ``phrt_addon`` of the other checkout is imported (as ``phrt_old``): its stage must take
-this checkout's ``LayerPixels`` and snapshots (true of the trace stage since 203265f)."""
+this checkout's snapshots (true of the trace stage since 203265f)."""
 from __future__ import annotations
 
 import argparse
@@ -22,27 +23,43 @@ import numpy as np
 
 def capture(args):
     """{mix of traced effects: (args, kwargs, rays)} of the frames with the most rays."""
+    from phrt.phrt_addon import frame
     from phrt.phrt_addon.trace import stage
     from profile_frame import replay_scene  # tools/: the scene loaded and its path replayed
     captured = {}
     run = stage.TraceStage.run
+    layer_pixels = frame.LayerPixels
+
+    def recorded(*a, **k):  # each layer's LayerPixels arguments, to make it again for each run
+        pixels = layer_pixels(*a, **k)
+        pixels.made_from = (a, k)
+        return pixels
 
     def keep(self, *a, **k):
         result = run(self, *a, **k)
         counters = result.counters
         rays = (counters.shadow_rays, counters.reflection_rays, counters.refraction_rays)
         mix = "+".join(name for name, count in zip(("shadows", "reflections", "refractions"), rays) if count)
-        if mix and (mix not in captured or sum(rays) > captured[mix][2]):
+        better = (lambda new, old: new < old) if args.pick == "fewest" else (lambda new, old: new > old)
+        if mix and (mix not in captured or better(sum(rays), captured[mix][2])):
             captured[mix] = (a, k, sum(rays))
         return result
 
     stage.TraceStage.run = keep
+    frame.LayerPixels = recorded
     width, height = (int(v) for v in args.resolution.lower().split("x"))
     try:
         replay_scene(args.scene, "HYBRID", args.frames, width, height, args.budget_ms, {"selection": "BENEFIT"})
     finally:
         stage.TraceStage.run = run
+        frame.LayerPixels = layer_pixels
     return captured
+
+
+def made_again(args, layer_pixels):
+    """The stage's arguments with each layer made again by ``layer_pixels`` (a module's class)."""
+    layers = {name: layer_pixels(*pixels.made_from[0], **pixels.made_from[1]) for name, pixels in args[1].items()}
+    return (args[0], layers) + tuple(args[2:])
 
 
 def same(new, old) -> bool:
@@ -70,24 +87,29 @@ def main(argv=None):
     parser.add_argument("--frames", default="1-60")
     parser.add_argument("--resolution", default="320x240")
     parser.add_argument("--repeats", type=int, default=12)
+    parser.add_argument("--pick", choices=("most", "fewest"), default="most",
+                        help="of each mix, the frame with the most rays or the fewest (the fixed part)")
     args = parser.parse_args(argv)
     links = Path(tempfile.mkdtemp(prefix="phrt-ab-"))
     (links / "phrt_old").symlink_to(Path(args.old).resolve(), target_is_directory=True)
     sys.path.insert(0, str(links))
     from phrt_old.phrt_addon.trace import stage as old_stage
+    from phrt_old.phrt_addon import frame_types as old_types
     from phrt.phrt_addon.trace import stage as new_stage
+    from phrt.phrt_addon import frame_types as new_types
     captured = capture(args)
     new, old = new_stage.TraceStage(None), old_stage.TraceStage(None)
     print(f"{args.scene} at {args.resolution}, budget {args.budget_ms:g} ms: trace stage ms, medians of "
           f"{args.repeats} alternate runs (this checkout / {args.old})")
     try:
         for mix, (a, k, rays) in sorted(captured.items()):
-            new.run(*a, **k), old.run(*a, **k)  # Embree builds, texture preparation
+            new.run(*made_again(a, new_types.LayerPixels), **k)  # Embree builds, texture preparation
+            old.run(*made_again(a, old_types.LayerPixels), **k)
             times = {"new": [], "old": []}
             for _ in range(args.repeats):
-                for name, stage in (("new", new), ("old", old)):
+                for name, stage, types in (("new", new, new_types), ("old", old, old_types)):
                     start = time.perf_counter()
-                    result = stage.run(*a, **k)
+                    result = stage.run(*made_again(a, types.LayerPixels), **k)
                     times[name].append((time.perf_counter() - start) * 1000.0)
                     if name == "new":
                         new_result = result

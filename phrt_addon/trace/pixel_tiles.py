@@ -34,11 +34,9 @@ class ImageTiles:
         # pass over, as they pass over NaN points (no surface: in no region, as with
         # ``PointChunks``).  One copy of the image, padded to whole tiles.
         points = np.full((rows * self.size, cols * self.size, 3), np.nan, np.float32)
-        points[:height, :width] = position
-        unwanted = np.ones(height * width, bool)
-        unwanted[flat] = False
-        row, col = np.divmod(np.flatnonzero(unwanted), width)  # fewer than the points (a 2D mask: 0.4 ms)
-        points[row, col] = np.nan
+        wanted = np.zeros(height * width, bool)
+        wanted[flat] = True
+        np.copyto(points[:height, :width], position, where=wanted.reshape(height, width, 1))
         # Rows of each tile first (one fast reduction), then its columns pairwise: numpy's
         # reduction over both axes at once took 5 ms at 320x240, this 0.3.
         blocks = points.reshape(rows, self.size, cols, self.size, 3)

@@ -294,11 +294,18 @@ class TiledShadowRegions:
     def __init__(self, light, points, chunks: PointChunks | None = None):
         self.light = light
         self.sun = lights.kind(light) is lights.LightKind.SUN  # parallel rays: a cylinder, not a cone
-        self.points = np.asarray(points, dtype=np.float64)
-        self.n = len(self.points)
+        # ``points``: (n, 3), or a function of an index giving those points (float64 world), with
+        # ``chunks`` given: only the points of reached chunks are then made (``LayerPixels.world``:
+        # a few casters' regions over a layer of 76,800 pixels reach a few thousand).
+        self._point_rows = points if callable(points) else None
+        self.points = None if callable(points) else np.asarray(points, dtype=np.float64)
+        if self.points is None and chunks is None:
+            raise ValueError("points given as a function need their chunks")
+        self.n = chunks.n if self.points is None else len(self.points)
         self.chunks = chunks if chunks is not None else PointChunks(self.points)
         if self.chunks.n != self.n:
             raise ValueError(f"chunks of {self.chunks.n} points for {self.n} points")
+        self._made = 0  # points made one region at a time; past half of them, all are made once
         self.queries = 0
         self.points_tested = 0
         if self.sun:
@@ -347,5 +354,13 @@ class TiledShadowRegions:
         if len(idx):
             self.points_tested += len(idx)
             with np.errstate(invalid="ignore", over="ignore"):  # a non-finite point is in no region
-                result[idx] = shadow_region(self.light, bounds, self.points[idx])
+                result[idx] = shadow_region(self.light, bounds, self._points(idx))
         return result
+
+    def _points(self, idx) -> np.ndarray:
+        if self.points is None:
+            self._made += len(idx)
+            if 2 * self._made <= self.n:
+                return np.asarray(self._point_rows(idx), np.float64)
+            self.points = np.asarray(self._point_rows(slice(None)), np.float64)
+        return self.points[idx]

@@ -43,16 +43,16 @@ def _ms(start):
     return (time.perf_counter() - start) * 1000.0
 
 
-def layer_tiles(pixels, points_world, size: int = TILE_PIXELS):
-    """A layer's points (``points_world``: ``pixels.world()``) in ``size`` x ``size`` screen
-    tiles: straight from the image when they cover at least a quarter of it (no sort: 2.3 ms
-    against 5.7 for arcade's opaque layer at 320x240), else sorted by tile (a transparent
-    layer's few pixels: 0.2 ms against 1.1 for the whole image's tiles)."""
+def layer_tiles(pixels, size: int = TILE_PIXELS):
+    """A layer's points in ``size`` x ``size`` screen tiles: straight from the image when they
+    cover at least a quarter of it (no sort, no world positions: 2.3 ms against 5.7 for
+    arcade's opaque layer at 320x240), else sorted by tile (a transparent layer's few pixels:
+    0.2 ms against 1.1 for the whole image's tiles)."""
     height, width = pixels.layer.covered.shape
     if 4 * len(pixels) >= height * width:
         return ImageTiles(pixels.layer.position, pixels.flat, pixels.origin, size)
     rows, cols = np.divmod(pixels.flat, width)
-    return PointChunks(points_world, keys=(rows // size) * (-(-width // size)) + cols // size)
+    return PointChunks(pixels.world(), keys=(rows // size) * (-(-width // size)) + cols // size)
 
 
 def _attribute(element_rays, elements, weights, rays):
@@ -174,6 +174,9 @@ class TraceStage:
     def _trace_bounces(parts, tracer, scene, traced, filled, item_rays, counters, prepare_ms, world):
         """Trace every ``_Bounce`` part in one ``radiance`` call; fill ``traced`` and the
         reflection and refraction counters (the call's time and Embree time shared by rays)."""
+        if not parts:  # no bounce this frame: no call at all (a call with no rays cost 1.9 ms)
+            counters.reflection_ms, counters.refraction_ms = prepare_ms["reflections"], prepare_ms["refractions"]
+            return
         start = time.perf_counter()
         embree_before = scene.stats["embree_ms"]
         tracer.batch_rays = np.zeros(len(parts))
@@ -285,15 +288,15 @@ class TraceStage:
         for layer_name, pixels in layers.items():
             if not casters or len(pixels) == 0:
                 continue
-            points_world = None
+            chunks = None
             for light_index, light in enumerate(snapshot.lights):
                 if not light.cast_shadows:
                     continue
                 setup_start = time.perf_counter()
-                if points_world is None:  # the layer's points in screen tiles, shared by its lights
-                    points_world = pixels.world()
-                    chunks = layer_tiles(pixels, points_world)
-                index = TiledShadowRegions(light, points_world, chunks)
+                if chunks is None:  # the layer's points in screen tiles, shared by its lights
+                    chunks = layer_tiles(pixels)
+                # World positions only of the points in tiles a caster may reach (pixels.world(idx)).
+                index = TiledShadowRegions(light, pixels.world, chunks)
                 region = np.zeros(len(pixels), bool)
                 caster_regions = []
                 for caster in casters:
@@ -304,7 +307,7 @@ class TraceStage:
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:
                     continue
-                points_trace = scene.to_trace(points_world[idx])
+                points_trace = scene.to_trace(pixels.world(idx))
                 direction, _, _ = shading.light_incidence(light, points_trace, scene.origin)
                 view_dirs = pixels.view_directions(idx)
                 facing = shading.dot(pixels.normals(idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
@@ -346,7 +349,7 @@ class TraceStage:
         start = time.perf_counter()
         reflecting = np.r_[wanted_effects["reflections"], False]
         for layer_name, pixels in layers.items():
-            if not bounces or len(pixels) == 0:
+            if not bounces or len(pixels) == 0 or not reflecting.any():
                 continue
             element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
             wanted = reflecting[element_of] & (reflection_blend(pixels.roughness) > 0)
@@ -365,8 +368,8 @@ class TraceStage:
         prepare_ms["reflections"] = _ms(start)
         start = time.perf_counter()
         pixels = layers["transparent"]
-        if bounces and len(pixels):
-            refracting = np.r_[wanted_effects["refractions"], False]
+        refracting = np.r_[wanted_effects["refractions"], False]
+        if bounces and len(pixels) and refracting.any():
             element_of = np.where((pixels.element >= 0) & (pixels.element < n_elements), pixels.element, -1)
             wanted = refracting[element_of] & (materials.transmissive[pixels.material] > rules.TRANSPARENT_EPSILON)
             wanted_idx = np.flatnonzero(wanted)

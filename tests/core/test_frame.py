@@ -258,3 +258,30 @@ def test_screen_rect_holds_the_projection_of_every_point_of_its_boxes():
     # A box reaching behind the camera projects without bound: read the frame whole.
     assert screen_rect(view, [(np.array([-1.0, -9.0, 1.0]), np.array([1.0, -7.0, 3.0]))], WIDTH, HEIGHT) is None
     assert screen_rect(view, [], WIDTH, HEIGHT) is None
+
+
+def test_layer_pixels_gather_on_demand_what_the_whole_gather_gives():
+    """``LayerPixels`` reads its images at the pixels asked for until a whole array is asked for:
+    the same values either way, in either order, and nothing gathered whole by an indexed call."""
+    snapshot = mirror_scene("RAYTRACE")
+    _, gbuffer, _ = render(snapshot)
+    materials = shading.MaterialTable(snapshot.materials)
+    made = lambda: LayerPixels(gbuffer.opaque, gbuffer.origin, snapshot.camera, materials)  # noqa: E731
+    whole = made()
+    index = np.random.default_rng(3).choice(len(whole), 200, replace=False)
+    parts = made()
+    world, directions = parts.world(index), parts.view_directions(index)
+    normals, distance = parts.normals(index), parts.camera_distance(index)
+    assert parts._cache == {}  # nothing gathered whole yet
+    np.testing.assert_array_equal(world, whole.world()[index])
+    np.testing.assert_array_equal(directions, whole.view_directions()[index])
+    np.testing.assert_array_equal(normals, whole.normals()[index])
+    np.testing.assert_array_equal(distance, whole.camera_distance()[index])
+    flat = whole.flat
+    np.testing.assert_array_equal(whole.position, gbuffer.opaque.position.reshape(-1, 3)[flat])
+    np.testing.assert_array_equal(whole.element, gbuffer.opaque.element.ravel()[flat])
+    np.testing.assert_array_equal(whole.roughness, gbuffer.opaque.roughness.ravel()[flat])
+    np.testing.assert_array_equal(whole.material, np.clip(gbuffer.opaque.material.ravel()[flat], 0,
+                                                          len(materials.ior) - 1))
+    # After the whole gather, an indexed call reads it (the same values).
+    np.testing.assert_array_equal(whole.world(index), world)

@@ -86,3 +86,35 @@ def test_no_points():
     tiles = ImageTiles(position, np.zeros(0, np.int64), origin)
     assert tiles.void.all()
     assert TiledShadowRegions(LIGHTS["sun"], np.zeros((0, 3)), tiles).region((np.zeros(3), np.ones(3))).shape == (0,)
+
+
+@pytest.mark.parametrize("kind", sorted(LIGHTS))
+def test_regions_from_points_made_on_demand_are_the_same_and_make_few_points(kind):
+    """The stage gives ``LayerPixels.world`` (a function of an index), not the layer's points:
+    the same regions, and a small caster's region makes only the points of the tiles it may
+    reach (a mutation making every point fails the count)."""
+    position, flat, origin = layer_image(height=150, width=203)
+    points = world(position, flat, origin)
+    made = []
+
+    def point_rows(index):
+        made.append(len(points[index]))
+        return points[index]
+
+    light = LIGHTS[kind]
+    tiles = ImageTiles(position, flat, origin, size=8)
+    lazy, whole = TiledShadowRegions(light, point_rows, tiles), TiledShadowRegions(light, points, tiles)
+    small = (np.array([-0.3, -0.3, 1.0]), np.array([0.3, 0.3, 1.4]))
+    expected = whole.region(small)
+    assert 0 < expected.sum()
+    np.testing.assert_array_equal(lazy.region(small), expected)
+    assert 0 < sum(made) < 0.2 * len(points)
+    # Casters reaching most of the layer: the points are made whole once, then reused.
+    rng = np.random.default_rng(9)
+    for _ in range(8):
+        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.5])
+        bounds = (centre - 2.0, centre + 2.0)
+        np.testing.assert_array_equal(lazy.region(bounds), whole.region(bounds))
+    assert sum(made) <= 1.5 * len(points) + 0.2 * len(points)
+    with pytest.raises(ValueError):
+        TiledShadowRegions(light, point_rows)  # made on demand: the chunks must be given
