@@ -108,16 +108,18 @@ class LayerPixels:
 
     def _gathered(self, name: str, index=slice(None)) -> np.ndarray:
         """The layer's image ``name`` at the pixels ``index`` (of ``flat``): from the whole
-        gather once made, else straight from the image (the whole gather kept)."""
+        gather once made, else straight from the image; an index over a quarter of the layer
+        makes the whole gather (kept)."""
         whole = self._cache.get(name)
         if whole is not None:
             return whole[index]
         image = getattr(self.layer, name)
         values = image.reshape(image.shape[0] * image.shape[1], -1) if image.ndim == 3 else image.reshape(-1)
-        if isinstance(index, slice) and index == slice(None):
+        rows = None if isinstance(index, slice) and index == slice(None) else self.flat[index]
+        if rows is None or 4 * len(rows) > len(self.flat):  # much of the layer: gathered whole, kept
             self._cache[name] = whole = values[self.flat]
-            return whole
-        return values[self.flat[index]]
+            return whole[index]
+        return values[rows]
 
     @property
     def position(self) -> np.ndarray:
@@ -142,6 +144,18 @@ class LayerPixels:
         return len(self.flat)
 
     def world(self, index=slice(None)) -> np.ndarray:
+        """float64 world positions of the pixels ``index``.  Once the calls in parts have asked for
+        more than half the layer (a frame's shadow regions, light after light), the whole layer's
+        are made once and kept: the lights after that share them."""
+        whole = self._cache.get("world")
+        if whole is not None:
+            return whole[index]
+        if isinstance(index, slice) and index == slice(None):
+            whole = self._cache["world"] = self._gathered("position").astype(np.float64) + self.origin
+            return whole
+        asked = self._cache["world_asked"] = self._cache.get("world_asked", 0) + len(self.flat[index])
+        if 2 * asked > len(self.flat):
+            return self.world()[index]
         return self._gathered("position", index).astype(np.float64) + self.origin
 
     def view_directions(self, index=slice(None)) -> np.ndarray:

