@@ -116,3 +116,31 @@ def test_regions_from_points_made_on_demand_are_the_same_and_make_few_points(kin
         np.testing.assert_array_equal(lazy.region(bounds), whole.region(bounds))
     with pytest.raises(ValueError):
         TiledShadowRegions(light, point_rows)  # made on demand: the chunks must be given
+
+
+@pytest.mark.parametrize("kind", sorted(LIGHTS))
+def test_cleared_pixels_at_the_camera_only_widen_their_tiles(kind):
+    """A read-back layer's uncovered pixels hold zeros (the camera, positions being camera
+    relative): their tiles' bounds reach the camera, the regions stay exact, and tiles with no
+    covered pixel are void."""
+    position, flat, origin = layer_image(origin=(50.0, -20.0, 3.0), holes=0.3)
+    uncovered = np.ones(position.shape[0] * position.shape[1], bool)
+    uncovered[flat] = False
+    position.reshape(-1, 3)[uncovered] = 0.0
+    position[:16] = 0.0  # two rows of tiles with no covered pixel at all
+    keep = np.flatnonzero(~uncovered)
+    flat = keep[keep >= 16 * position.shape[1]]
+    points = world(position, flat, origin)
+    tiles = ImageTiles(position, flat, origin, size=8)
+    assert tiles.void[:2 * 13].all() and not tiles.void[2 * 13:].all()
+    light = LIGHTS[kind]
+    if light.kind != "SUN":
+        light = Light(light.name, light.kind, light.color, position=np.asarray(light.position) + origin,
+                      direction=light.direction)
+    index = TiledShadowRegions(light, points, tiles)
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.5]) + origin
+        half = rng.uniform(0.05, 0.5, size=3)
+        bounds = (centre - half, centre + half)
+        np.testing.assert_array_equal(index.region(bounds), shadow_region(light, bounds, points))
