@@ -294,6 +294,16 @@ def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, execut
 
     try:
         outcomes, files, no_report = sweep_engine.run_plan(plan_path, plan, executor, on_outcome=show)
+    except (sweep_engine.SweepInterrupted, KeyboardInterrupt) as stop:
+        # A signal during a run stops it between frames (SweepInterrupted); Ctrl-C elsewhere (the
+        # oracle, a warm-up frame) raises KeyboardInterrupt: the job's temporary folder is gone.
+        name = getattr(stop, "signal_name", "SIGINT")
+        during = f" during {stop.job_id}" if hasattr(stop, "job_id") else ""
+        progress.clear()
+        complete = sum(plan_module.run_is_complete(folder / job.id, plan) for job in plan.runs)
+        print(f"phrt: sweep interrupted by {name}{during}: {complete} of {len(plan.runs)} runs complete "
+              f"are kept; run the same command again to resume", file=sys.stderr)
+        return 128 + int(getattr(signal, name))
     except executors.ExecutorError as error:
         raise UserError(str(error)) from None
     except OSError as error:  # a full disk under the report

@@ -30,6 +30,16 @@ from ..engine.runs import camera_path
 _WARM = set()
 
 
+class SweepInterrupted(BaseException):
+    """A signal (SIGINT, SIGTERM) stopped a run of the sweep: the whole sweep stops (the runs complete
+    so far stay, and running the same command again resumes).  A BaseException, so that the
+    executor, which records an ordinary failure and goes on with the next job, lets it through."""
+
+    def __init__(self, signal_name: str, job_id: str, frames_done: int):
+        super().__init__(f"{signal_name} during {job_id} ({frames_done} frames done)")
+        self.signal_name, self.job_id, self.frames_done = signal_name, job_id, frames_done
+
+
 def _load(scene_name):
     """Register PHRT and open ``scene_name`` (a .blend path or a sample scene name)."""
     blender_process.blender()
@@ -109,6 +119,8 @@ def _run(plan, folder, job, scene, camera, partial) -> str:
                                scene_label=label, budget_at=job.budget_at, budget_ms=job.budget_ms,
                                budget_search_dirs=[folder / reference for reference in references],
                                overrides=job.overrides)
+        if result.cancelled and result.signal:
+            raise SweepInterrupted(result.signal, job.id, result.frames_done)
         if result.cancelled:
             raise RuntimeError(f"run {job.id} stopped after {result.frames_done} frames")
         message = f"{result.frames_done} frames, mean {result.summary['total_ms']['mean']:.0f} ms"

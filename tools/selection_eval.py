@@ -91,6 +91,8 @@ def evaluate(args) -> list:
             status = cli.main(["sweep", scene, "--path", path, "--frames", args.frames, "--budget-at", args.budget_at,
                                "--variants", variants, "--oracle-every", str(args.oracle_every),
                                "--resolution", args.resolution, "--out", str(sweep_dir)])
+            if status >= 128:  # a signal stopped it: so it stops the evaluation (rerun to resume)
+                return status
             if status != 0:
                 print(f"selection-eval: the sweep of {target} failed (status {status})", file=sys.stderr)
         sweep_csv = sweep_dir / "report" / "sweep.csv"

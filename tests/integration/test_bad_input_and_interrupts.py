@@ -280,6 +280,36 @@ def test_a_signal_stops_the_replay_between_frames_and_keeps_everything_complete(
     assert summary["frames_planned"] == FRAMES and not summary.get("error")
 
 
+def test_a_signal_stops_the_whole_sweep_not_only_its_run(files, tmp_path):
+    """SIGTERM during a sweep's first run stops the sweep (exit 128 + 15, one line saying how to
+    resume); no later job starts (it went on with the next job, each signal cancelling one run)."""
+    out = tmp_path / "sweep"
+    process = subprocess.Popen([str(PHRT), "sweep", str(files / "path.blend"), "--out", str(out),
+                                "--resolution", "960x720", "--budget-at", "0.5", "--variants", "measured"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and process.poll() is None:
+            started = [folder for folder in out.glob(".*.partial-*") if (folder / schema.FRAMES_CSV).exists()]
+            if started and len(run_files.read_frames(started[0])) >= 2:
+                break
+            time.sleep(0.05)
+        assert process.poll() is None, "the sweep ended before it could be interrupted"
+        process.send_signal(signal.SIGTERM)
+        stdout, stderr = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 128 + signal.SIGTERM, stderr
+    lines = [line for line in stderr.splitlines() if line.strip() and "EGL" not in line]
+    assert any("sweep interrupted by SIGTERM during" in line and "resume" in line for line in lines), lines
+    assert not any("failed" in line for line in lines), lines
+    # Only the interrupted first run was started: no other job's folder, no report.
+    started = [path.name for path in out.iterdir() if path.is_dir()]
+    assert started == [], started
+    assert "[2/" not in stdout + stderr
+
+
 def test_the_operator_refuses_a_folder_it_cannot_create(files, tmp_path):
     """A read-only tmpfs as root (every permission check passes for root), a folder without write
     permission otherwise (the ``files`` fixture)."""
