@@ -19,7 +19,7 @@ Stages (the columns of frames.csv, docs/formats.md):
 - select_ms     element statistics from the element-id image and the heuristic;
 - trace_ms      Embree upload of changed geometry, shadow / reflection / refraction rays,
                 shading of the ray hits, and the upload of their results to the GPU;
-- composite_ms  the deferred lighting passes, composite and read-back of the image.
+- composite_ms  the deferred lighting passes, composite, read-back of the image and its passes.
 
 Pay only for what is used: RASTER never touches the tracer (``embreex`` is not
 even imported) nor reads the layers back, no lights means no shadow work, and no
@@ -199,6 +199,11 @@ class FrameRenderer:
         measure = traced is not None and (learn_benefit or (choice is not None and self.benefit_selector.wants_measurement(
             frame_elements.names, choice, self.frames_rendered)))
         combined = raster.shade(traced, measure_change=measure)
+        # The passes made from the image are frame work: timed with the composite (no stage held them).
+        passes = self._passes(snapshot, raster, combined, selected, candidate)
+        # PHRT Rate: per pixel the rate its traced terms came at (0: raster), rows bottom to top.
+        passes.rate = np.zeros((raster.height, raster.width), np.float32) if traced_frame.rate is None else traced_frame.rate
+        passes.effect_rate = traced_frame.effect_rate or None
         composite_ms = _ms(start)
         # Uploading the traced results is part of the tracing's cost, which scales with the selection.
         traced_upload_ms = float(raster.stats.get("traced_upload_ms", 0.0)) if traced is not None else 0.0
@@ -206,11 +211,6 @@ class FrameRenderer:
         composite_ms = max(composite_ms - traced_upload_ms, 0.0)
         # The first draw of a lighting/composite configuration compiles its shaders (one-time).
         shade_setup_ms = float(raster.stats.get("shade_setup_ms", 0.0))
-        passes = self._passes(snapshot, raster, combined, selected, candidate)
-        # PHRT Rate: per pixel the rate its traced terms came at (0: raster), rows bottom to top.
-        passes.rate = traced_frame.rate if traced_frame.rate is not None else \
-            np.zeros((raster.height, raster.width), np.float32)
-        passes.effect_rate = traced_frame.effect_rate or None
 
         if choice is not None:
             start = _timer()
