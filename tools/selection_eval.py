@@ -69,6 +69,14 @@ def _variants(requested):
     return ",".join(known)
 
 
+class EvaluationInterrupted(Exception):
+    """A sweep was stopped by a signal (its exit status): the evaluation stops, no table is written."""
+
+    def __init__(self, status: int):
+        super().__init__(f"a sweep was interrupted (status {status})")
+        self.status = status
+
+
 def evaluate(args) -> list:
     from phrt import cli
     from phrt.cli import blender_process as blender
@@ -92,7 +100,7 @@ def evaluate(args) -> list:
                                "--variants", variants, "--oracle-every", str(args.oracle_every),
                                "--resolution", args.resolution, "--out", str(sweep_dir)])
             if status >= 128:  # a signal stopped it: so it stops the evaluation (rerun to resume)
-                return status
+                raise EvaluationInterrupted(status)
             if status != 0:
                 print(f"selection-eval: the sweep of {target} failed (status {status})", file=sys.stderr)
         sweep_csv = sweep_dir / "report" / "sweep.csv"
@@ -156,7 +164,12 @@ def main(argv=None) -> int:
     parser.add_argument("--table-only", action="store_true",
                         help="only (re)write the table from the sweeps already in --out")
     args = parser.parse_args(argv)
-    table = evaluate(args)
+    try:
+        table = evaluate(args)
+    except EvaluationInterrupted as stop:
+        print("selection-eval: stopped; run the same command again to resume (complete sweeps are reused)",
+              file=sys.stderr)
+        return stop.status
     write_table(Path(args.out), "selection_eval", COLUMNS, table, markdown(table))
     return 0
 

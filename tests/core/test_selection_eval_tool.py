@@ -1,0 +1,21 @@
+"""``tools/selection_eval.py``: a sweep stopped by a signal stops the evaluation with the sweep's
+exit status (no later path is swept, no table written over the last one)."""
+import sys
+from pathlib import Path
+
+TOOLS = Path(__file__).resolve().parents[2] / "tools"
+
+
+def test_a_signal_stopping_a_sweep_stops_the_evaluation(monkeypatch, tmp_path, capsys):
+    monkeypatch.syspath_prepend(str(TOOLS))
+    import selection_eval
+    from phrt import cli
+    calls = []
+    monkeypatch.setattr(cli, "main", lambda argv: calls.append(argv) or 143)  # SIGTERM during the first
+    status = selection_eval.main(["--out", str(tmp_path / "eval"), "--paths", "arcade/path3,atrium/path2",
+                                  "--variants", "measured"])
+    assert status == 143
+    assert len(calls) == 1  # the second path was not swept
+    assert not (tmp_path / "eval" / "selection_eval.csv").exists()
+    assert "resume" in capsys.readouterr().err
+    sys.modules.pop("selection_eval", None)
