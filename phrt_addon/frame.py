@@ -216,6 +216,8 @@ class FrameRenderer:
             start = _timer()
             measured = item_benefit.measure(snapshot, layers, raster.traced_change(), traced, choice.chosen,
                                             element_bounds) if measure else None
+            if traced is not None and self.frames_rendered > 0 and shade_setup_ms == 0.0:  # what measuring costs
+                self.benefit_selector.observe_measure_cost(measure, composite_ms + (_ms(start) if measure else 0.0))
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
             self.item_costs.tick(choice.eligible.any(axis=0), choice.chosen.any(axis=0) & (traced is not None))
             if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
@@ -373,8 +375,6 @@ class FrameRenderer:
         for light in (light for light in snapshot.lights if light.cast_shadows and casters):
             footprint[casters] += scale * ShadowRegionIndex(light, points).counts([element_bounds[i] for i in casters])
         return footprint
-
-    # ------------------------------------------------------------------
 
 
 def clamp_finite(array: np.ndarray) -> np.ndarray:

@@ -65,8 +65,9 @@ import numpy as np
 
 from . import knapsack
 from .frame_time import (AIM_OVER, AIM_RANGE, AIM_SHARE, AIM_STEP, MARGIN_FRAMES, STEADY_FRAMES,  # noqa: F401
-                         STEADY_QUANTILE, FrameTime)
+                         STEADY_QUANTILE, FrameTime, MeasureCost)
 from .item_choice import ItemChoice
+from ..finite import finite
 from ..schema import EFFECTS
 
 SWITCH = 0.25
@@ -92,9 +93,12 @@ TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
 TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
 KEEP_SMOOTHING = 0.1
 KEEP_RANGE = (0.25, 1.0)  # a share learned near 0 would never be tried again
-# Measured on every MEASURE_EVERY-th traced frame (the GPU's change read back costs ms), and
-# on any frame that traces an item never measured.
+# A traced frame measures what its items changed (the GPU's change read back costs ms): when it
+# traces an item never measured; MEASURE_EVERY frames after the last measurement when the time
+# its items leave pays the measurement's learned cost (frame_time.MeasureCost); MEASURE_STALE
+# frames after it in any case.
 MEASURE_EVERY = 2
+MEASURE_STALE = 8
 # The material priors are recomputed (the layers read before the selection) every PRIOR_EVERY
 # frames, and on any frame with a visible candidate that has none yet.
 PRIOR_EVERY = 8
@@ -126,6 +130,8 @@ class BenefitSelector:
         self.frames = 0
         self._names_keys = None  # (the last frame's names, their item keys)
         self.time = FrameTime()  # the margin, the steady time left, the aim
+        self.measure_cost = MeasureCost()
+        self.measured_frame = -MEASURE_STALE  # the frame index of the last measurement
 
     def _keys(self, names) -> list:
         """:func:`_item_keys`, kept while the element names stay those of the last frame."""
@@ -146,7 +152,7 @@ class BenefitSelector:
                               count=shape[0] * len(EFFECTS)).reshape(shape)
         fresh = np.isnan(learned)
         estimate = np.where(fresh, np.asarray(priors, np.float64).reshape(shape), learned)
-        return np.clip(np.nan_to_num(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
+        return np.clip(finite(estimate, nan=0.0, posinf=0.0), 0.0, MAX_VALUE), fresh
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
                tiers: bool = False, fixed_ms=None, unmeasured=None, tier_costs=None, visible=None) -> ItemChoice:
@@ -163,8 +169,8 @@ class BenefitSelector:
         visible = eligible.any(axis=1) if visible is None else np.asarray(visible, bool).reshape(len(names))
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
         value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
-        value = np.where(eligible, np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
-        cost = np.clip(np.nan_to_num(np.asarray(cost_ms, np.float64), nan=np.inf, posinf=np.inf), 0.0, np.inf)
+        value = np.where(eligible, np.clip(finite(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
+        cost = np.clip(finite(cost_ms, nan=np.inf, posinf=np.inf), 0.0, np.inf)
         self.frames += 1
         available = max(float(time_left_ms) - float(overhead_ms), 0.0)
         margin = self.margin_ms(available)
@@ -178,7 +184,7 @@ class BenefitSelector:
         peak = available / steady if 0.0 < steady < available else (1.0 if steady > 0.0 else NO_ROOM)
         add_factor = (1.0 + ADD_SLACK) * peak
         fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
-            np.clip(np.nan_to_num(np.asarray(fixed_ms, np.float64), nan=np.inf), 0.0, np.inf)
+            np.clip(finite(fixed_ms, nan=np.inf), 0.0, np.inf)
         if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
             for j in np.flatnonzero(np.asarray(unmeasured, bool) & eligible.any(axis=0)):
                 fits = eligible[:, j] & (cost[:, j] + fixed[j] <= capacity)
@@ -208,7 +214,7 @@ class BenefitSelector:
                              count=count).reshape(eligible.shape)
         if tier_costs is None:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
-        tier_costs = np.clip(np.nan_to_num(np.asarray(tier_costs, np.float64), nan=np.inf), 0.0, np.inf)
+        tier_costs = np.clip(finite(tier_costs, nan=np.inf), 0.0, np.inf)
         charged = np.where(was, cost * (1.0 - HOLD), cost * add_factor)
 
         def fill(allowed, bonus, room, fixed_due):
@@ -302,7 +308,7 @@ class BenefitSelector:
         if measured is not None and pixels is not None:
             pixels = np.asarray(pixels, np.float64)
             with np.errstate(divide="ignore", invalid="ignore"):
-                seen_all = np.clip(np.nan_to_num(np.asarray(measured, np.float64) / pixels), 0.0, MAX_VALUE)
+                seen_all = np.clip(finite(np.asarray(measured, np.float64) / pixels), 0.0, MAX_VALUE)
             measuring = eligible & chosen & (pixels > 0)
         else:
             seen_all, measuring = None, np.zeros(eligible.shape, bool)
@@ -312,7 +318,7 @@ class BenefitSelector:
         decaying = [key for key, flag in zip(rest_keys, known.tolist()) if flag]
         if decaying:
             estimate = np.fromiter(map(self.estimates.__getitem__, decaying), np.float64, count=len(decaying))
-            prior = np.nan_to_num(np.asarray(priors, np.float64).ravel()[rest[known]])
+            prior = finite(np.asarray(priors, np.float64).ravel()[rest[known]])
             self.estimates.update(zip(decaying, (estimate + DECAY * (prior - estimate)).tolist()))
         for key in (key for key, flag in zip(rest_keys, known.tolist()) if not flag):
             self.waited[key] = self.waited.get(key, 0) + 1
@@ -352,9 +358,20 @@ class BenefitSelector:
         return np.array([self.prior_cache.get(name, zero) for name in names], np.float64).reshape(len(names), 3)
 
     def wants_measurement(self, names, choice: ItemChoice, frame_index: int) -> bool:
-        if frame_index % MEASURE_EVERY == 0:
-            return True
-        return any((names[i], EFFECTS[j]) not in self.estimates for i, j in zip(*np.nonzero(choice.chosen)))
+        """Whether this traced frame measures what its items changed (see MEASURE_EVERY); a yes
+        is recorded as a measurement at ``frame_index``."""
+        since = frame_index - self.measured_frame
+        cost = self.measure_cost.cost_ms()
+        spare = float(choice.capacity_ms) - float(np.sum(choice.chosen_cost_ms)) - float(choice.fixed_ms)
+        wanted = since >= MEASURE_STALE or (since >= MEASURE_EVERY and (cost is None or spare >= cost)) or any(
+            (names[i], EFFECTS[j]) not in self.estimates for i, j in zip(*np.nonzero(choice.chosen)))
+        if wanted:
+            self.measured_frame = frame_index
+        return wanted
+
+    def observe_measure_cost(self, measured: bool, ms: float) -> None:
+        """A steady traced frame's composite ms, with the measurement's own ms when it measured."""
+        self.measure_cost.observe(measured, ms)
 
     @property
     def aim(self) -> float:

@@ -16,6 +16,12 @@ The steady time left
     An item not traced last frame must fit (with ``benefit_selection.ADD_SLACK``) in the
     ``STEADY_QUANTILE``-th percentile of the time left over the last ``STEADY_FRAMES`` frames
     (this one included), not in this frame's peak.
+The measurement's cost
+    Measuring what the traced items changed (the GPU's change targets, their read-back and the
+    per-item sums) costs a traced frame some ms the knapsack does not plan: the median over the
+    last ``MEASURE_SAMPLES`` traced frames that measured, less that of those that did not
+    (``MeasureCost``).  A frame measures when the time its items leave pays for it, or when its
+    items were not measured for long (``benefit_selection.BenefitSelector.wants_measurement``).
 The aim
     What the time left cannot see (the raster half's and the composite's own noise, the trace
     stage's spread around its prediction) makes frames of fixed work swing: a raster-only or
@@ -45,6 +51,7 @@ AIM_SHARE = 0.05
 AIM_OVER = 1.05
 AIM_STEP = 0.05
 AIM_RANGE = (0.5, 1.25)
+MEASURE_SAMPLES = 8
 
 
 def percentile(values, q: float) -> float:
@@ -107,3 +114,21 @@ class FrameTime:
         ``frames``."""
         if np.isfinite(predicted_ms) and np.isfinite(measured_ms) and measured_ms >= 0:
             self.errors.append((int(frames), float(measured_ms) - float(predicted_ms)))
+
+
+class MeasureCost:
+    """What measuring the traced change adds to a traced frame (see the module's docstring)."""
+
+    def __init__(self):
+        self.measured: deque = deque(maxlen=MEASURE_SAMPLES)  # composite + measurement ms, measured frames
+        self.plain: deque = deque(maxlen=MEASURE_SAMPLES)  # composite ms of traced frames that did not
+
+    def observe(self, measured: bool, ms: float) -> None:
+        if np.isfinite(ms) and ms >= 0:
+            (self.measured if measured else self.plain).append(float(ms))
+
+    def cost_ms(self):
+        """The measurement's ms, or None before two frames of each kind were seen."""
+        if len(self.measured) < 2 or len(self.plain) < 2:
+            return None
+        return max(percentile(self.measured, 50) - percentile(self.plain, 50), 0.0)

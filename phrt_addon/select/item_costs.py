@@ -42,6 +42,7 @@ from collections import deque
 
 import numpy as np
 
+from ..finite import finite
 from ..schema import EFFECTS
 from .benefit_selection import TIER_COST, TIER_RATES
 from .cost_model import MS_PER_RAY_PRIOR, UNMEASURED_MARGIN
@@ -105,7 +106,7 @@ class ItemCosts:
 
     def rays_ms(self, rays) -> np.ndarray:
         """(n, 3) ms of items casting ``rays`` (n, 3), their effects' fixed parts not included."""
-        rays = np.maximum(np.nan_to_num(np.asarray(rays, np.float64), nan=0.0, posinf=MAX_MS), 0.0)
+        rays = np.maximum(finite(rays, nan=0.0, posinf=MAX_MS), 0.0)
         out = np.empty_like(rays)
         for j, effect in enumerate(EFFECTS):
             _, scale, exponent, embree, largest = self._fit[effect]
@@ -157,13 +158,13 @@ class ItemCosts:
         """(n, 3) ms of each item at full rate, its effect's fixed part not included."""
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
         ms = self.rays_ms(rays) * np.asarray(rt_cost, np.float64).reshape(-1, 1)
-        return np.clip(np.nan_to_num(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
+        return np.clip(finite(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
     def tier_costs(self, names, expected_rays, pixels, rt_cost) -> np.ndarray:
         """(n, 3, len(TIER_RATES)) ms of each item at each rate of ``TIER_RATES``."""
         full = self.predict(names, expected_rays, rt_cost)
         out = np.empty(full.shape + (len(TIER_RATES),))
-        pixels = np.nan_to_num(np.asarray(pixels, np.float64), nan=0.0, posinf=0.0)
+        pixels = finite(pixels, nan=0.0, posinf=0.0)
         q = np.asarray(rt_cost, np.float64).reshape(-1, 1)
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
         for j, effect in enumerate(EFFECTS):
@@ -174,7 +175,7 @@ class ItemCosts:
                 else:
                     out[:, j, option] = (self.rays_ms(rays * rate)[:, j] + per_pixel * pixels[:, j] * (1.0 - rate)) \
                         * q[:, 0]
-        return np.clip(np.nan_to_num(out, nan=MAX_MS, posinf=MAX_MS), 0.0, MAX_MS)
+        return np.clip(finite(out, nan=MAX_MS, posinf=MAX_MS), 0.0, MAX_MS)
 
     # -- learning ------------------------------------------------------------------------------
     def observe(self, names, expected_rays, item_rays, chosen, rates, effect_ms, effect_rays,
@@ -182,7 +183,7 @@ class ItemCosts:
         """A traced frame: ``expected_rays``/``item_rays``/``chosen``/``rates`` (n, 3);
         ``effect_ms``/``effect_rays``/``embree_ms`` (3,) the trace stage's counters per effect."""
         expected = np.asarray(expected_rays, np.float64) * np.where(np.asarray(rates) > 0, rates, 1.0)
-        item_rays = np.nan_to_num(np.asarray(item_rays, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        item_rays = finite(item_rays, nan=0.0, posinf=0.0, neginf=0.0)
         chosen = np.asarray(chosen, bool)
         for i, j in zip(*np.nonzero(chosen & (expected > 0) & (item_rays > 0))):
             key = (names[i], EFFECTS[j])

@@ -67,6 +67,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import defaults
+from ..finite import finite
 from .cost_model import MAX_PREDICTED_MS, normalise_cost_mode
 from ..schema import MODES, ORDERS, RELEVANCES
 
@@ -84,7 +85,7 @@ MAX_VISIBILITY = 1e12
 
 
 def clamp_finite(values, *, nan: float, low: float, high: float) -> np.ndarray:
-    array = np.nan_to_num(np.asarray(values, dtype=np.float64), nan=nan, posinf=high, neginf=low)
+    array = finite(values, nan=nan, posinf=high, neginf=low)
     return np.clip(array, low, high)
 
 
