@@ -56,13 +56,25 @@ def prior_per_pixel(layers, n_elements, reflections, refractions, shadows, mater
     (then no element is visible and every prior is 0); ``reflections``, ``refractions``,
     ``shadows`` are the elements' effect flags; ``materials`` the ``shading.MaterialTable``.
     """
+    return _prior(layers, n_elements, (reflections, refractions, shadows), materials, apart=False)[:, 0]
+
+
+def prior_terms(layers, n_elements, reflections, refractions, shadows, materials) -> np.ndarray:
+    """(n, 3): :func:`prior_per_pixel`'s reflection, refraction and shadow terms apart: the
+    BENEFIT selection's per-item priors, the layers' pixels gathered once for all three."""
+    return _prior(layers, n_elements, (reflections, refractions, shadows), materials, apart=True)
+
+
+def _prior(layers, n_elements, flags, materials, apart: bool) -> np.ndarray:
+    """(n, 3) the terms per element (``apart``) or (n, 1) their sum, averaged over a sample of
+    each element's pixels."""
     from ..trace.tracer import reflection_blend
 
-    total = np.zeros(n_elements)
+    total = np.zeros((n_elements, 3 if apart else 1))
     count = np.zeros(n_elements)
     if layers is None:
         return total
-    flags = [np.asarray(flag, bool) for flag in (reflections, refractions, shadows)]
+    flags = [np.asarray(flag, bool) for flag in flags]
     f0 = shading.specular_f0(materials.base_color, materials.metallic, materials.ior) @ LUMINANCE
     transmissive = materials.transmission * (1.0 - materials.metallic)
     for pixels in layers.values():
@@ -72,12 +84,13 @@ def prior_per_pixel(layers, n_elements, reflections, refractions, shadows, mater
             continue
         element = element[ours]
         material = pixels.material[ours]
-        expected = (flags[0][element] * f0[material] * reflection_blend(pixels.roughness[ours]) * REFLECTION_CONTRAST
-                    + flags[1][element] * transmissive[material] * REFRACTION_CONTRAST
-                    + flags[2][element] * SHADOW_PRIOR)
-        total += np.bincount(element, weights=expected, minlength=n_elements)
+        terms = (flags[0][element] * f0[material] * reflection_blend(pixels.roughness[ours]) * REFLECTION_CONTRAST,
+                 flags[1][element] * transmissive[material] * REFRACTION_CONTRAST,
+                 flags[2][element] * SHADOW_PRIOR)
+        for column, expected in enumerate(terms if apart else (terms[0] + terms[1] + terms[2],)):
+            total[:, column] += np.bincount(element, weights=expected, minlength=n_elements)
         count += np.bincount(element, minlength=n_elements)
-    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
+    return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0)
 
 
 def measure_differences(snapshot, layers, change, traced, selected, element_bounds) -> np.ndarray:

@@ -28,14 +28,11 @@ def item_pixels(area_px, footprint) -> np.ndarray:
 
 
 def priors(layers, n_elements, flags, materials) -> np.ndarray:
-    """(n, 3) expected difference per changed pixel of each item, from the materials."""
-    none = np.zeros(n_elements, bool)
-    columns = []
-    for effect in EFFECTS:
-        only = {name: (flags[name] if name == effect else none) for name in EFFECTS}
-        columns.append(benefit.prior_per_pixel(layers, n_elements, only["reflections"], only["refractions"],
-                                               only["shadows"], materials))
-    return np.stack(columns, axis=1)
+    """(n, 3) expected difference per changed pixel of each item, from the materials (columns in
+    ``EFFECTS`` order: shadows, reflections, refractions)."""
+    terms = benefit.prior_terms(layers, n_elements, flags["reflections"], flags["refractions"], flags["shadows"],
+                                materials)  # reflections, refractions, shadows
+    return terms[:, [2, 0, 1]]
 
 
 def measure(snapshot, layers, change, traced, chosen, element_bounds) -> np.ndarray:

@@ -97,6 +97,30 @@ def test_prior_ranks_a_mirror_above_a_matte_surface_before_either_is_traced():
     assert benefit.prior_per_pixel(None, 3, [True] * 3, [True] * 3, [True] * 3, materials).tolist() == [0, 0, 0]
 
 
+def test_the_item_priors_are_the_prior_of_each_effect_alone_and_sum_to_the_elements_prior():
+    """BENEFIT's (n, 3) priors gather the layers once for all three effects: each column is the
+    element's prior with that effect alone tagged, exactly; the columns sum to its prior."""
+    from phrt.phrt_addon.select import item_benefit
+    rng = np.random.default_rng(3)
+    materials = shading.MaterialTable([
+        Material("Mirror", base_color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.1),
+        Material("Glass", base_color=(1.0, 1.0, 1.0), transmission=1.0, roughness=0.0, ior=1.5),
+        Material("Paint", base_color=(0.3, 0.5, 0.2), roughness=0.4)])
+    layers = {name: types.SimpleNamespace(element=rng.integers(-1, 6, 500), material=rng.integers(0, 3, 500),
+                                          roughness=rng.random(500).astype(np.float32))
+              for name in ("opaque", "transparent")}
+    flags = {effect: rng.random(5) < 0.6 for effect in ("shadows", "reflections", "refractions")}
+    items = item_benefit.priors(layers, 5, flags, materials)
+    none = np.zeros(5, bool)
+    for column, effect in enumerate(("shadows", "reflections", "refractions")):
+        alone = {name: (flags[name] if name == effect else none) for name in flags}
+        np.testing.assert_array_equal(items[:, column], benefit.prior_per_pixel(
+            layers, 5, alone["reflections"], alone["refractions"], alone["shadows"], materials))
+    whole = benefit.prior_per_pixel(layers, 5, flags["reflections"], flags["refractions"], flags["shadows"], materials)
+    np.testing.assert_allclose(items.sum(axis=1), whole, rtol=1e-12)
+    assert (items > 0).any(axis=0).all()  # every effect has a prior somewhere
+
+
 def test_running_estimate_replaces_the_prior_then_averages():
     model = benefit.BenefitModel(smoothing=0.5)
     names = ["mirror", "matte"]
