@@ -94,7 +94,8 @@ TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
 KEEP_SMOOTHING = 0.1
 KEEP_RANGE = (0.25, 1.0)  # a share learned near 0 would never be tried again
 # A traced frame measures what its items changed (the GPU's change read back costs ms): when it
-# traces an item never measured; MEASURE_EVERY frames after the last measurement when the time
+# traces an item never measured or at another rate than at its last measurement; MEASURE_EVERY
+# frames after the last measurement when the time
 # its items leave pays the measurement's learned cost (frame_time.MeasureCost); MEASURE_STALE
 # frames after it in any case.
 MEASURE_EVERY = 2
@@ -303,8 +304,11 @@ class BenefitSelector:
         self.previous = {keys[k] for k in traced}
         rates = np.ones(len(keys)) if choice.rate is None else np.asarray(choice.rate, np.float64).ravel()
         self.previous_rate = {keys[k]: float(rates[k]) for k in traced}
-        # Per eligible item: measured (traced, with a measurement), else decayed towards its prior
-        # (it has an estimate: the view moved on since), else one more frame waited.
+        # Per eligible item: measured (traced, with a measurement); traced without one: kept as
+        # it is (a traced frame measures at most every MEASURE_STALE frames, and a traced item's
+        # estimate pulled towards its prior meanwhile drifted 30-40% of the way there); not traced:
+        # decayed towards its prior (it has an estimate: the view moved on since), else one more
+        # frame waited.
         if measured is not None and pixels is not None:
             pixels = np.asarray(pixels, np.float64)
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -312,7 +316,7 @@ class BenefitSelector:
             measuring = eligible & chosen & (pixels > 0)
         else:
             seen_all, measuring = None, np.zeros(eligible.shape, bool)
-        rest = np.flatnonzero((eligible & ~measuring).ravel())
+        rest = np.flatnonzero((eligible & ~chosen).ravel())
         rest_keys = [keys[k] for k in rest]
         known = np.fromiter(map(self.estimates.__contains__, rest_keys), bool, count=len(rest_keys))
         decaying = [key for key, flag in zip(rest_keys, known.tolist()) if flag]
@@ -363,8 +367,12 @@ class BenefitSelector:
         since = frame_index - self.measured_frame
         cost = self.measure_cost.cost_ms()
         spare = float(choice.capacity_ms) - float(np.sum(choice.chosen_cost_ms)) - float(choice.fixed_ms)
+        rate = np.ones(np.shape(choice.chosen)) if choice.rate is None else choice.rate
+        # An item never measured, or traced at another rate than at its last measurement (quality
+        # tiers learn the share a rate keeps from such pairs), is measured at once.
         wanted = since >= MEASURE_STALE or (since >= MEASURE_EVERY and (cost is None or spare >= cost)) or any(
-            (names[i], EFFECTS[j]) not in self.estimates for i, j in zip(*np.nonzero(choice.chosen)))
+            (names[i], EFFECTS[j]) not in self.estimates or self.measured_at.get((names[i], EFFECTS[j])) != rate[i, j]
+            for i, j in zip(*np.nonzero(choice.chosen)))
         if wanted:
             self.measured_frame = frame_index
         return wanted

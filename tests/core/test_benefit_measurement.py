@@ -3,7 +3,9 @@
 knapsack does not plan, so it is taken from the time the chosen items leave; an item never
 measured is measured at once; nothing goes unmeasured for more than MEASURE_STALE frames."""
 import numpy as np
+import pytest
 
+from phrt.phrt_addon.select import benefit_selection
 from phrt.phrt_addon.select.benefit_selection import MEASURE_EVERY, MEASURE_STALE, BenefitSelector
 from phrt.phrt_addon.select.frame_time import MeasureCost
 from phrt.phrt_addon.select.item_choice import ItemChoice
@@ -25,6 +27,7 @@ def measured_selector(measure_ms):
     """A selector whose mirror was measured once and whose measurements cost ``measure_ms``."""
     selector = BenefitSelector()
     selector.estimates[("Mirror", "reflections")] = 0.2
+    selector.measured_at[("Mirror", "reflections")] = 1.0  # measured at full rate
     for _ in range(4):
         selector.observe_measure_cost(True, 10.0 + measure_ms)
         selector.observe_measure_cost(False, 10.0)
@@ -61,6 +64,7 @@ def test_a_frame_measures_when_the_time_its_items_leave_pays_for_it():
 def test_before_its_cost_is_known_a_frame_measures_every_other_frame():
     selector = BenefitSelector()
     selector.estimates[("Mirror", "reflections")] = 0.2
+    selector.measured_at[("Mirror", "reflections")] = 1.0
     wanted = [selector.wants_measurement(NAMES, choice(10.0, 9.5), frame) for frame in range(1, 9)]
     assert wanted == [True, False] * 4
 
@@ -70,6 +74,7 @@ def test_an_item_never_measured_is_measured_on_its_first_traced_frame_whatever_t
     assert selector.wants_measurement(NAMES, choice(10.0, 8.0), 30)  # stale: first of all
     assert not selector.wants_measurement(NAMES, choice(10.0, 8.0), 31)
     del selector.estimates[("Mirror", "reflections")]  # as if the mirror had never been measured
+    del selector.measured_at[("Mirror", "reflections")]
     assert selector.wants_measurement(NAMES, choice(10.0, 8.0), 32)
 
 
@@ -88,3 +93,31 @@ def test_no_measurement_rule_reads_milliseconds_of_this_machine():
         return [selector.wants_measurement(NAMES, choice(capacity * scale, cost * scale), frame)
                 for frame, (capacity, cost) in enumerate(spares, 50)]
     assert decide(slow, 1.0) == decide(fast, 0.5)
+
+
+def test_a_traced_item_keeps_its_estimate_between_measurements_and_an_untraced_one_decays():
+    """Only an item not traced is pulled towards its prior (DECAY a frame): a traced item whose
+    frame did not measure keeps what it was measured at (measured every 8th frame at most, it
+    drifted 30-40% of the way to its prior between measurements)."""
+    selector = BenefitSelector()
+    selector.estimates[("Mirror", "reflections")] = 0.1
+    selector.estimates[("Statue", "reflections")] = 0.1
+    traced = choice(20.0, 8.0)  # the mirror's reflection traced, the statue's visible and not
+    traced.eligible[1, 1] = True
+    priors = np.full((2, 3), 0.5)
+    for _ in range(7):
+        selector.observe(NAMES, traced, priors, measured=None, pixels=np.full((2, 3), 100.0))
+    assert selector.estimates[("Mirror", "reflections")] == 0.1
+    decayed = 0.5 - 0.4 * (1.0 - benefit_selection.DECAY) ** 7
+    assert selector.estimates[("Statue", "reflections")] == pytest.approx(decayed)
+
+
+def test_a_rate_other_than_at_the_last_measurement_is_measured_at_once():
+    """Quality tiers learn the share a rate keeps from a measurement at that rate after one at full
+    rate: a change of rate is measured on its first frame, whatever the time left."""
+    selector = measured_selector(5.0)
+    assert selector.wants_measurement(NAMES, choice(10.0, 8.0), 30)  # stale: measured
+    assert not selector.wants_measurement(NAMES, choice(10.0, 8.0), 31)
+    quarter = choice(10.0, 8.0)
+    quarter.rate = np.where(quarter.chosen, 0.25, 0.0)
+    assert selector.wants_measurement(NAMES, quarter, 32)
