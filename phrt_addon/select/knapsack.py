@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import knapsack_bounds
+from ..finite import finite
 
 DEFAULT_BINS = 256
 EXACT_LIMIT = 1000
@@ -37,10 +38,8 @@ LARGE = np.finfo(np.float64).max / 4
 
 
 def _finite(values, nan: float) -> np.ndarray:
-    array = np.asarray(values, dtype=np.float64).ravel()
-    if np.isfinite(array).all():  # the usual case, without nan_to_num's copies
-        return array
-    return np.nan_to_num(array, nan=nan, posinf=LARGE, neginf=0.0)
+    """Flat float64, NaN as ``nan``, +inf as LARGE, -inf as 0 (no copy when all finite)."""
+    return finite(values, nan=nan, posinf=LARGE, neginf=0.0).ravel()
 
 
 def _number(value, nan: float) -> float:
