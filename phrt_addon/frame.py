@@ -37,11 +37,12 @@ from .select import selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
-from .raster.gbuffer import PixelGrid, element_pixel_stats, front_points, screen_rect
+from .raster.gbuffer import PixelGrid, element_pixel_stats, front_points
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
 from .trace.stage import TraceResult, TraceStage, traced_effects
+from .trace.trace_rect import trace_rect
 
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
@@ -75,7 +76,7 @@ class FrameRenderer:
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None;
         # with it, per effect name the rate every element's effect is traced at (tools/rate_flip.py).
         self.forced_selection = None
-        self.crop_readback = True  # a frame tracing reflections and refractions only reads their rectangle
+        self.crop_readback = True  # a frame that traces reads back only the rectangle its effects change
         self.forced_rates = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
 
@@ -111,9 +112,7 @@ class FrameRenderer:
         learn_benefit = may_trace and mode == "HYBRID" and str(settings.relevance).upper() == "ERROR" \
             and not use_benefit
 
-        def read_layers(elements=None):  # with elements: only the rectangle their bounds project to
-            rect = None if elements is None or not self.crop_readback else screen_rect(
-                snapshot.camera, [element_bounds[i] for i in np.flatnonzero(elements[:-1])], raster.width, raster.height)
+        def read_layers(elements=None, rect=None):  # elements: only their pixels; rect: only that read back
             gbuffer = raster.gbuffer(rect)
             return {name: LayerPixels(getattr(gbuffer, name), gbuffer.origin, snapshot.camera, materials, elements, rect)
                     for name in ("opaque", "transparent")}
@@ -185,8 +184,10 @@ class FrameRenderer:
         traced_frame = TraceResult(traced=None, element_rays=np.zeros(n_elements))
         if np.any(selected) and may_trace:
             if layers is None:  # only a frame that traces reads the layers back (a trace cost)
-                begin = _timer()
-                layers = read_layers(self.ray_pixels(snapshot, selected, selection.effects))
+                begin, wanted = _timer(), traced_effects(snapshot.elements, selected, selection.effects)
+                layers = read_layers(self.ray_pixels(snapshot, selected, selection.effects), trace_rect(
+                    snapshot, wanted, element_bounds, self.element_bounds.scene_bounds(snapshot), raster.width,
+                    raster.height) if self.crop_readback else None)
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
                                                 effects=selection.effects,
@@ -285,9 +286,8 @@ class FrameRenderer:
 
     @staticmethod
     def ray_pixels(snapshot, selected, effects):
-        """(n + 1,) bool over element ids: the elements whose pixels the trace stage casts rays
-        from, when they are all it needs (reflections and refractions leave from their own
-        element's pixels); None when shadows are traced (their receivers are anyone's pixels)."""
+        """(n + 1,) bool over element ids: the elements whose own pixels all rays leave from (reflections,
+        refractions); None when shadows are traced (their receivers are anyone's pixels)."""
         wanted = traced_effects(snapshot.elements, selected, effects)
         if np.any(wanted["shadows"]) and any(light.cast_shadows for light in snapshot.lights):
             return None

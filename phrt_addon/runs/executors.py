@@ -22,8 +22,7 @@ event loop in the process's main thread, so a worker plugin given to :class:`Das
 (``cli/dask_worker.py``) imports ``bpy`` and registers PHRT on the event loop when the worker
 starts, and :func:`on_main_thread` runs the file loading of a job there.
 
-Dask is an optional dependency: nothing here imports it until a :class:`DaskExecutor` starts.
-Plain Python, no ``bpy``.
+Dask is optional: nothing here imports it until a :class:`DaskExecutor` starts.  No ``bpy``.
 """
 from __future__ import annotations
 
@@ -74,9 +73,7 @@ def executor_options(workers=None, scheduler=None, dashboard=None, tls_ca_file=N
     if dashboard is not None and workers is None:
         raise ExecutorError("--dashboard is for the LocalCluster of --workers: an existing cluster's dashboard is "
                             "its scheduler's")
-    options = {}
-    if dashboard is not None:
-        options["dashboard_address"] = dashboard
+    options = {} if dashboard is None else {"dashboard_address": dashboard}
     if tls_ca_file is not None:
         options["security"] = tls_security(tls_ca_file, tls_cert, tls_key)
     return options
@@ -184,40 +181,43 @@ def describe_error(error: BaseException) -> str:
 
 class _WorkerExits(logging.Filter):
     """Hands the nanny's lines about worker processes that did not exit cleanly (INFO, which
-    LocalCluster silences) to every listening executor; lets through warnings and errors.  One per
-    process on ``distributed.nanny`` (one per executor would hide lines from the others)."""
+    LocalCluster silences) to every listening executor; lets through warnings and errors, but not
+    the scheduler's on a heartbeat of a worker it removed (one leaving a loaded machine).  One per
+    process on ``distributed.nanny`` and ``distributed.scheduler``."""
 
     PATTERN = re.compile(r"Worker process (\d+) (was killed by .*|exited with status \d+)")
+    BENIGN = "Received heartbeat from unregistered worker"
 
     def __init__(self):
         super().__init__()
         self.listeners = []  # lists of (pid, what happened)
 
     def filter(self, record):
-        match = self.PATTERN.search(record.getMessage())
-        if match:
+        message = record.getMessage()
+        if match := self.PATTERN.search(message):
             for listener in self.listeners:
                 listener.append((int(match.group(1)), match.group(2)))
-        return record.levelno >= logging.WARNING
+        return record.levelno >= logging.WARNING and not message.startswith(self.BENIGN)
 
 
-def _worker_exits() -> _WorkerExits:
+def worker_log_filter() -> _WorkerExits:
     """The process's filter on the ``distributed.nanny`` logger (added the first time)."""
     logger = logging.getLogger("distributed.nanny")
     found = next((item for item in logger.filters if isinstance(item, _WorkerExits)), None)
     if found is None:
         found = _WorkerExits()
         logger.addFilter(found)
+        logging.getLogger("distributed.scheduler").addFilter(found)
     return found
 
 
 def _listen_to_worker_exits(listener: list):
-    _worker_exits().listeners.append(listener)
+    worker_log_filter().listeners.append(listener)
     logging.getLogger("distributed.nanny").setLevel(logging.INFO)
 
 
 def _stop_listening(listener: list):
-    watcher = _worker_exits()
+    watcher = worker_log_filter()
     watcher.listeners = [item for item in watcher.listeners if item is not listener]
 
 

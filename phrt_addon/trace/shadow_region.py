@@ -63,6 +63,29 @@ class ElementBounds:
             self._world[key] = cached
         return cached
 
+    def scene_bounds(self, snapshot):
+        """World (min, max) of every mesh's triangles, of an element or not (where any receiver
+        of a shadow lies), or None without triangles; per mesh kept while its content and matrix
+        stay."""
+        boxes = []
+        for mesh in snapshot.meshes:
+            if mesh.n_triangles == 0:
+                continue
+            matrix = np.asarray(mesh.matrix_world, dtype=np.float64)
+            key = ("mesh", mesh.geometry_key, matrix.tobytes())
+            cached = self._world.get(key)
+            if cached is None:
+                used = mesh.positions[np.asarray(mesh.triangles).ravel()]
+                corners = transform_points(matrix, box_corners(used.min(axis=0), used.max(axis=0)))
+                cached = (corners.min(axis=0), corners.max(axis=0))
+                if len(self._world) >= self.CACHE_LIMIT:
+                    self._world.pop(next(iter(self._world)))
+                self._world[key] = cached
+            boxes.append(cached)
+        if not boxes:
+            return None
+        return np.min([box[0] for box in boxes], axis=0), np.max([box[1] for box in boxes], axis=0)
+
     def __call__(self, snapshot) -> list:
         """Per element, (min, max) world bounds, or None when it has no triangles."""
         bounds = [None] * len(snapshot.elements)

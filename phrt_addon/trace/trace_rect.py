@@ -1,0 +1,154 @@
+"""Where on screen a frame's traced effects can change pixels: the rectangle of the G-buffer
+that the read-back before tracing and the trace stage need.
+
+Reflections and refractions leave from their elements' own pixels: the projection of those
+elements' bounds (``gbuffer.screen_rect``).  A shadow changes the receivers in its caster's
+shadow region (``shadow_region.shadow_region``: a cylinder downstream of the caster for the sun,
+a cone from a local light), which is unbounded; but a receiver is a surface of the scene, so
+it lies in the scene's bounds, and within them the region is held by a convex hull of 16
+points (two boxes across the cylinder or the cone, at its near and far ends).  The hull is
+clipped by the camera's near plane and projected: every pixel whose surface the region
+holds, in any layer, lies in the rectangle.  A frame tracing a small caster's shadows then
+reads back, tiles and tests the pixels of that rectangle, not the whole frame (the read-back
+and the tiles of the layers were 7.5 of the 12.8 ms a frame traced one statue's 180 shadow
+rays in, atrium path1 at 320x240).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..raster.gbuffer import RECT_MAX_SHARE, RECT_PAD, screen_rect
+from ..scene import lights, shading
+from ..scene.snapshot import box_corners
+
+# The hull is grown by this share of its scale (and the region's radius by it): float64
+# rounding between the region's test and the projection, far below a pixel.
+SLACK = 1e-6
+
+
+def shadow_hull(light, bounds, scene_bounds) -> np.ndarray | None:
+    """(16, 3) world points whose convex hull holds every point of the box ``scene_bounds``
+    (low, high) that ``shadow_region(light, bounds, .)`` accepts; None when that is not
+    bounded (a local light inside the caster's bounding sphere: the region is everything)."""
+    low, high = (np.asarray(b, np.float64) for b in bounds)
+    scene_low, scene_high = (np.asarray(b, np.float64) for b in scene_bounds)
+    centre = (low + high) / 2.0
+    radius = 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+    # A receiver and the caster's centre both lie in the scene's bounds: no farther apart than
+    # its diagonal (the caster is one of the scene's meshes).
+    diagonal = float(np.linalg.norm(np.maximum(scene_high, high) - np.minimum(scene_low, low)))
+    scale = diagonal + float(np.abs(centre).max()) + radius
+    if lights.kind(light) is lights.LightKind.SUN:
+        direction = shading.normalize(np.asarray(light.direction, dtype=np.float64))
+        # The cylinder of the caster's sphere from ``radius`` upstream to where it leaves the
+        # scene's bounds downstream (a point of it is within ``radius`` of the axis on each
+        # coordinate), ``diagonal`` at most.
+        far = min(diagonal, _exit(centre, direction, radius, 0.0, scene_low, scene_high))
+        ends = np.stack([centre - radius * direction, centre + max(far, -radius) * direction])
+        across = np.full(2, radius)
+    else:
+        origin = np.asarray(light.position, dtype=np.float64)
+        to_centre = centre - origin
+        distance = float(np.linalg.norm(to_centre))
+        if not distance > radius * (1.0 + SLACK):
+            return None
+        axis = to_centre / distance
+        cos_cone = np.sqrt(max(1.0 - (radius / distance) ** 2, 0.0))
+        tan_cone = radius / max(distance * cos_cone, 1e-300)
+        # Along the axis: from the nearest point the region accepts (farther than distance -
+        # radius from the light, within the cone) to the farthest receiver (the light's distance
+        # to the caster plus the scene's diagonal); across it, the cone's radius there.
+        near = (distance - radius) * cos_cone
+        far = min(distance + diagonal, _exit(origin, axis, 0.0, tan_cone, scene_low, scene_high))
+        along = np.array([near, max(far, near)])
+        ends = origin + along[:, None] * axis
+        across = along * tan_cone
+    across = across * (1.0 + SLACK) + SLACK * scale
+    corners = box_corners(ends - across[:, None], ends + across[:, None]).reshape(-1, 3)
+    return corners if np.all(np.isfinite(corners)) else None
+
+
+def _exit(start, axis, reach, spread, low, high) -> float:
+    """The largest t at which a point within ``reach + t * spread`` of ``start + t * axis`` on
+    each coordinate can still be inside the box (low, high): the slabs' exits (inf: none)."""
+    t = np.inf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rising = axis - spread  # the least a coordinate grows by per unit t, on the way up
+        falling = axis + spread  # the most it grows by (below 0: the way down)
+        up = np.where(rising > 0, (high + reach - start) / rising, np.inf)
+        down = np.where(falling < 0, (low - reach - start) / falling, np.inf)
+    exits = np.concatenate([up, down])
+    exits = exits[np.isfinite(exits)]
+    return float(min(t, exits.min())) if len(exits) else t
+
+
+def hull_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
+    """(x, y, w, h) pixels (row 0 at the bottom) holding the projection of the convex hull of
+    ``points`` (world) in front of the camera's near plane, grown by ``pad``; None when the
+    frame is better read whole (not finite, or over RECT_MAX_SHARE of it)."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    clip = np.c_[points, np.ones(len(points))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
+    if not np.all(np.isfinite(clip)):
+        return None
+    w = clip[:, 3]
+    near = float(camera.clip_start) if not camera.ortho else -np.inf
+    front = w >= near
+    kept = [clip[front]]
+    if not front.all() and front.any():
+        # Where the hull's edges cross the near plane: every pair of a point in front and one
+        # behind (the hull's edges are among them; the others cross inside the hull).
+        a, b = clip[front], clip[~front]
+        t = (a[:, None, 3] - near) / (a[:, None, 3] - b[None, :, 3])
+        kept.append((a[:, None, :] + t[..., None] * (b[None, :, :] - a[:, None, :])).reshape(-1, 4))
+    kept = np.concatenate(kept)
+    if len(kept) == 0:
+        return 0, 0, min(1, int(width)), min(1, int(height))  # behind the camera: nothing on screen
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ndc = kept[:, :2] / kept[:, 3:4]
+    if not np.all(np.isfinite(ndc)):
+        return None
+    ndc = np.clip(ndc, -4.0, 4.0)  # beyond the frame either way (ints stay small)
+    x0 = max(int(np.floor((ndc[:, 0].min() + 1.0) * 0.5 * width)) - pad, 0)
+    x1 = min(int(np.ceil((ndc[:, 0].max() + 1.0) * 0.5 * width)) + pad, int(width))
+    y0 = max(int(np.floor((ndc[:, 1].min() + 1.0) * 0.5 * height)) - pad, 0)
+    y1 = min(int(np.ceil((ndc[:, 1].max() + 1.0) * 0.5 * height)) + pad, int(height))
+    if x1 <= x0 or y1 <= y0:
+        return 0, 0, min(1, int(width)), min(1, int(height))  # off screen: one pixel
+    if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def union_rect(rects, width: int, height: int):
+    """The rectangle holding every one of ``rects``; None when one is None (the whole frame) or
+    the union is over RECT_MAX_SHARE of the frame."""
+    if not rects or any(rect is None for rect in rects):
+        return None
+    x0 = min(rect[0] for rect in rects)
+    y0 = min(rect[1] for rect in rects)
+    x1 = max(rect[0] + rect[2] for rect in rects)
+    y1 = max(rect[1] + rect[3] for rect in rects)
+    if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int, height: int):
+    """The rectangle holding every pixel the traced effects ``wanted`` ({effect: (n,) bool},
+    ``stage.traced_effects``) can change or cast rays from, or None (read the whole frame)."""
+    rects = []
+    leaving = np.flatnonzero(wanted["reflections"] | wanted["refractions"])
+    if len(leaving):
+        rects.append(screen_rect(snapshot.camera, [element_bounds[i] for i in leaving], width, height))
+    casters = [i for i in np.flatnonzero(wanted["shadows"]) if element_bounds[i] is not None]
+    shadow_lights = [light for light in snapshot.lights if light.cast_shadows]
+    if casters and shadow_lights:
+        if scene_bounds is None:
+            return None
+        for light in shadow_lights:
+            for caster in casters:
+                hull = shadow_hull(light, element_bounds[caster], scene_bounds)
+                rects.append(None if hull is None else hull_rect(snapshot.camera, hull, width, height))
+                if rects[-1] is None:
+                    return None
+    return union_rect(rects, width, height) if rects else None

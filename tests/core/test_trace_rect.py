@@ -1,0 +1,121 @@
+"""The rectangle a frame's traced effects can change (phrt_addon/trace/trace_rect.py): every
+pixel whose surface lies in a caster's shadow region and in the scene's bounds is inside it,
+and a frame read back in it is the same, pixel for pixel, as one read whole."""
+import numpy as np
+import pytest
+
+from phrt.phrt_addon.frame import FrameRenderer
+from phrt.phrt_addon.scene.snapshot import Light
+from phrt.phrt_addon.trace.shadow_region import ElementBounds, shadow_region
+from phrt.phrt_addon.trace.trace_rect import hull_rect, shadow_hull, union_rect
+
+from test_frame import HEIGHT, WIDTH, ReferenceRaster, camera, mirror_scene, render
+
+
+def _pixels(view, points):
+    """(pixel x, pixel y, in front of the near plane) of world points."""
+    clip = np.c_[points, np.ones(len(points))] @ (view.projection @ view.view_matrix).T
+    w = clip[:, 3]
+    front = w >= view.clip_start
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = (clip[:, 0] / w + 1.0) * 0.5 * WIDTH
+        y = (clip[:, 1] / w + 1.0) * 0.5 * HEIGHT
+    return x, y, front
+
+
+def _region_samples(rng, light, low, high, reach, n=20000):
+    """Points spread over the caster's shadow region (the cylinder or the cone of its bounding
+    sphere, ``reach`` long), kept where ``shadow_region`` accepts them."""
+    centre, radius = (low + high) / 2.0, 0.5 * np.linalg.norm(high - low)
+    lateral = rng.normal(size=(n, 3))
+    lateral *= (radius * rng.uniform(0, 1, n) ** (1 / 3) / np.linalg.norm(lateral, axis=1))[:, None]
+    if light.kind == "SUN":
+        direction = np.asarray(light.direction) / np.linalg.norm(light.direction)
+        points = centre + rng.uniform(-radius, reach, n)[:, None] * direction + lateral
+    else:
+        origin = np.asarray(light.position)
+        target = centre + lateral  # a point of the sphere, the ray from the light through it
+        direction = (target - origin) / np.linalg.norm(target - origin, axis=1)[:, None]
+        distance = np.linalg.norm(centre - origin)
+        points = origin + rng.uniform(max(distance - radius, 0), distance + reach, n)[:, None] * direction
+    return points[shadow_region(light, (low, high), points)]
+
+
+def test_every_region_point_of_the_scene_projects_inside_the_rectangle():
+    """Random scenes, casters, suns and lamps, cameras looking at the caster: every point of the
+    region inside the scene's bounds and in front of the camera projects inside the rectangle
+    (and the rectangle is a real crop in most cases: the test is not passed by None)."""
+    cropped = 0
+    for seed in range(150):
+        rng = np.random.default_rng(seed)
+        scene_low = rng.uniform(-20, 0, 3)
+        scene_high = scene_low + rng.uniform(4, 30, 3)
+        low = rng.uniform(scene_low, scene_high - 1.0)
+        high = low + rng.uniform(0.05, 1.0, 3)
+        if seed % 2:
+            light = Light("Sun", "SUN", (1.0, 1.0, 1.0), direction=tuple(rng.normal(size=3)))
+        else:
+            light = Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=tuple(rng.uniform(scene_low - 5, scene_high + 5)))
+        centre = (low + high) / 2.0
+        away = rng.normal(size=3)
+        eye = centre + away / np.linalg.norm(away) * rng.uniform(3.0, 25.0)
+        view = camera(tuple(eye), tuple(centre + rng.normal(scale=2.0, size=3)))
+        hull = shadow_hull(light, (low, high), (scene_low, scene_high))
+        points = _region_samples(rng, light, low, high, float(np.linalg.norm(scene_high - scene_low)))
+        points = points[np.all((points >= scene_low) & (points <= scene_high), axis=1)]
+        if hull is None:
+            assert light.kind != "SUN"
+            continue
+        rect = hull_rect(view, hull, WIDTH, HEIGHT)
+        x, y, front = _pixels(view, points)
+        seen = front & (x >= 0) & (x < WIDTH) & (y >= 0) & (y < HEIGHT)
+        if rect is None:
+            continue  # the whole frame
+        cropped += bool(np.any(seen))
+        x0, y0, w, h = rect
+        assert np.all((x[seen] >= x0) & (x[seen] < x0 + w) & (y[seen] >= y0) & (y[seen] < y0 + h)), seed
+    assert cropped >= 30
+
+
+def test_a_small_caster_in_front_of_the_camera_gives_a_small_rectangle():
+    view = camera((0.0, -6.0, 2.0), (0.0, 0.0, 0.5))
+    box = (np.array([-0.3, -0.3, 0.0]), np.array([0.3, 0.3, 0.6]))
+    scene = (np.array([-20.0, -20.0, 0.0]), np.array([20.0, 20.0, 5.0]))
+    sun = Light("Sun", "SUN", (1.0, 1.0, 1.0), direction=(0.3, 0.4, -1.0))
+    x0, y0, w, h = hull_rect(view, shadow_hull(sun, box, scene), WIDTH, HEIGHT)
+    assert w * h < 0.2 * WIDTH * HEIGHT
+    # A lamp inside the caster's bounding sphere: every point may be shadowed.
+    assert shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.0, 0.0, 0.3)), box, scene) is None
+    # A hull wholly behind the camera: one pixel.
+    behind = box[0] - [0, 20, 0], box[1] - [0, 20, 0]
+    assert hull_rect(view, np.array([behind[0], behind[1]]), WIDTH, HEIGHT) == (0, 0, 1, 1)
+    assert union_rect([(0, 0, 2, 2), None], WIDTH, HEIGHT) is None
+    assert union_rect([(0, 0, 2, 2), (5, 6, 2, 2)], WIDTH, HEIGHT) == (0, 0, 7, 8)
+
+
+def test_scene_bounds_hold_every_mesh():
+    snapshot = mirror_scene("RAYTRACE")
+    low, high = ElementBounds().scene_bounds(snapshot)
+    for mesh in snapshot.meshes:
+        world = mesh.positions @ np.asarray(mesh.matrix_world)[:3, :3].T + np.asarray(mesh.matrix_world)[:3, 3]
+        assert np.all(world >= low - 1e-9) and np.all(world <= high + 1e-9)
+
+
+def test_a_frame_tracing_shadows_reads_back_a_rectangle_and_is_the_same_as_read_whole(monkeypatch):
+    """The block's shadow (a sun) and the mirror: read back in their rectangle, smaller than
+    the frame; the image, the rays and the traced pixels are those of the frame read whole."""
+    rects = []
+    read = ReferenceRaster.gbuffer
+    monkeypatch.setattr(ReferenceRaster, "gbuffer", lambda self, rect=None: rects.append(rect) or read(self, rect))
+    cropped, _, _ = render(mirror_scene("RAYTRACE", lights=True))
+    assert cropped.stats["shadow_rays"] > 0 and cropped.stats["reflection_rays"] > 0
+    assert rects[-1] is not None
+    x, y, w, h = rects[-1]
+    assert 0 < w * h < 0.6 * WIDTH * HEIGHT
+    renderer = FrameRenderer(threads=1)
+    renderer.crop_readback = False
+    whole, _, _ = render(mirror_scene("RAYTRACE", lights=True), renderer)
+    assert rects[-1] is None
+    for key in ("shadow_rays", "reflection_rays", "rays"):
+        assert whole.stats[key] == cropped.stats[key]
+    np.testing.assert_array_equal(whole.passes.combined, cropped.passes.combined)
