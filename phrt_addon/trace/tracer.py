@@ -32,6 +32,11 @@ ROUGHNESS_LIMIT = 0.5
 TIR_BOUNCE_COST = 0.25
 # Surfaces a path may pass straight through (alpha cards, glass out of bounces).
 MAX_PASS_THROUGH = 16
+# A secondary ray is traced only while its path's throughput to the camera (the product of the
+# weights its bounces were taken with, largest channel) is at least this: a path weighted less
+# changes its pixel by under PATH_CUTOFF x the radiance it would bring back (below one 8-bit step
+# for a radiance up to 2), and is given the world colour instead, as an untraced reflection is.
+PATH_CUTOFF = 2e-3
 # Secondary directions are kept at least this cosine away from the geometric surface.
 MIN_LEAVING_COSINE = 1e-4
 
@@ -131,14 +136,16 @@ class RadianceTracer:
             total += part
         return total
 
-    def radiance(self, origins, directions, depth, passed=0, batch=None):
+    def radiance(self, origins, directions, depth, passed=0, batch=None, weight=1.0):
         """Radiance arriving along trace-frame rays (N,3).  ``depth``: the bounces this ray has
         taken (0 for a camera ray, 1 for a ray leaving the G-buffer), a number or one per ray;
         ``passed``: the surfaces its path has passed straight through; ``batch`` (optional): a
-        label per ray (small ints), every ray its path casts counted in ``batch_rays``."""
+        label per ray (small ints), every ray its path casts counted in ``batch_rays``;
+        ``weight``: the path's throughput so far (``PATH_CUTOFF``)."""
         n = len(origins)
         depth = np.broadcast_to(np.asarray(depth, dtype=np.float64), (n,))
         passed = np.broadcast_to(np.asarray(passed, dtype=np.int64), (n,))
+        weight = np.broadcast_to(np.asarray(weight, dtype=np.float64), (n,))
         result = np.broadcast_to(self.world, (n, 3)).copy()
         if n == 0:
             return result
@@ -184,6 +191,7 @@ class RadianceTracer:
         blend = reflection_blend(surface.roughness)
         depth = depth[idx]
         passed = passed[idx]
+        weight = weight[idx]
         can_bounce = depth < self.max_bounces
         transmits = transmissive > rules.TRANSPARENT_EPSILON
         # Total internal reflection: nothing is refracted, and the bounce costs only
@@ -191,17 +199,23 @@ class RadianceTracer:
         total_internal = transmits & (fresnel_t >= 1.0)
         next_depth = depth + np.where(total_internal, TIR_BOUNCE_COST, 1.0)
         reflected = np.broadcast_to(self.world, (len(idx), 3)).copy()
-        trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02)
+        reflect_path = weight * blend * reflect_weight.max(axis=1)
+        trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02) \
+            & (reflect_path >= PATH_CUTOFF)
         refracts = transmits & ~total_internal
         tint = np.where(entering[:, None], surface.albedo, 1.0)
-        trace_refraction = can_bounce & refracts
+        refract_weight = (transmissive * (1.0 - fresnel_t))[:, None] * tint
+        refract_path = weight * refract_weight.max(axis=1)
+        trace_refraction = can_bounce & refracts & (refract_path >= PATH_CUTOFF)
+        world_through = np.flatnonzero(can_bounce & refracts & ~trace_refraction)  # too faint: the world colour
         # Straight on, unbent: the 1 - alpha part of the surface, and the transmitted part of a
         # transmissive surface out of bounces (the raster's blended transparency).
         alpha = m.alpha[material][:, None]
         straight_weight = (1.0 - alpha) + alpha * np.where(
             (refracts & ~can_bounce)[:, None], (transmissive * (1.0 - fresnel_t))[:, None] * tint, 0.0)
         straight = np.flatnonzero(straight_weight.max(axis=1) > 0)
-        more = passed[straight] < MAX_PASS_THROUGH
+        straight_path = weight[straight] * straight_weight[straight].max(axis=1)
+        more = (passed[straight] < MAX_PASS_THROUGH) & (straight_path >= PATH_CUTOFF)
 
         # Every secondary ray of this batch (reflected, refracted, passing straight on) is traced
         # in one call: one Embree query and one hit shading per bounce level, not per branch.
@@ -218,12 +232,14 @@ class RadianceTracer:
             np.concatenate([reflect_direction, refract_direction, dirs[s]]),
             np.concatenate([next_depth[r], next_depth[t], depth[s]]),
             np.concatenate([passed[r], passed[t], passed[s] + 1]),
-            None if batch is None else np.concatenate([batch[r], batch[t], batch[s]]))
+            None if batch is None else np.concatenate([batch[r], batch[t], batch[s]]),
+            np.concatenate([reflect_path[r], refract_path[t], straight_path[more]]))
         traced, through, passing = np.split(secondary, [len(r), len(r) + len(t)])
 
         reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
         color += reflect_weight * reflected
-        color[t] += (transmissive[t] * (1.0 - fresnel_t[t]))[:, None] * tint[t] * through
+        color[t] += refract_weight[t] * through
+        color[world_through] += refract_weight[world_through] * self.world
         color *= alpha
         if len(straight):
             behind = np.broadcast_to(self.world, (len(straight), 3)).copy()

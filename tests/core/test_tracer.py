@@ -273,6 +273,29 @@ def test_reflections_stop_at_max_bounces(closing):
     np.testing.assert_allclose(color[0], [0.25, 0.5, 1.0], rtol=1e-6)
 
 
+def test_a_path_too_faint_to_show_is_not_traced_further(closing, monkeypatch):
+    """Two parallel glossy dielectric plates (about 4% reflected at normal incidence): the second
+    reflection's path weighs 0.04^2 < PATH_CUTOFF, so it is not traced and brings the world
+    colour back instead; the radiance differs from tracing every bounce by under PATH_CUTOFF x
+    the world colour.  Mirrors (weight 1) bounce to max_bounces as before (test above)."""
+    from phrt.phrt_addon.trace import tracer as tracer_module
+    cutoff = tracer_module.PATH_CUTOFF
+    glossy = Material("glossy", base_color=(0.9, 0.2, 0.1), roughness=0.0)
+    meshes = [quad("a", (0, 0, 0), 10, 10, "+z"), quad("b", (0, 0, 1), 10, 10, "-z")]
+    snap = snapshot(meshes, [glossy], world=(0.25, 0.5, 1.0), max_bounces=8)
+    origins, directions = [[0.0, 0.0, 0.5]], np.array([[0.0, 0.0, 1.0]])
+    scene, cut = build(snap)
+    closing(scene)
+    faint = cut.radiance(scene.to_trace(origins), directions, 0)
+    monkeypatch.setattr(tracer_module, "PATH_CUTOFF", 0.0)
+    scene, every = build(snap)
+    closing(scene)
+    full = every.radiance(scene.to_trace(origins), directions, 0)
+    assert every.rays == 9 and cut.rays == 2
+    assert np.all(np.abs(faint - full) <= cutoff * 1.0)  # the world colour's largest channel: 1
+    assert np.any(np.abs(faint - full) > 0)  # the cut paths did change something (below the bound)
+
+
 # -- shadows: acne, leaks, scale --------------------------------------------------------------------
 
 SCALES = [(1e-3, 0.0), (1.0, 0.0), (1e3, 0.0), (1e5, 0.0), (1.0, 1e5), (1e-3, 1e3)]
