@@ -182,8 +182,8 @@ def describe_error(error: BaseException) -> str:
 class _WorkerExits(logging.Filter):
     """Hands the nanny's lines about worker processes that did not exit cleanly (INFO, which
     LocalCluster silences) to every listening executor; lets through warnings and errors, but not
-    the scheduler's on a heartbeat of a worker it removed (one leaving a loaded machine).  One per
-    process on ``distributed.nanny`` and ``distributed.scheduler``."""
+    the scheduler's on a heartbeat of a worker it removed (one leaving a loaded machine: a filter of
+    its own on ``distributed.scheduler``).  One per process on ``distributed.nanny``."""
 
     PATTERN = re.compile(r"Worker process (\d+) (was killed by .*|exited with status \d+)")
     BENIGN = "Received heartbeat from unregistered worker"
@@ -193,11 +193,10 @@ class _WorkerExits(logging.Filter):
         self.listeners = []  # lists of (pid, what happened)
 
     def filter(self, record):
-        message = record.getMessage()
-        if match := self.PATTERN.search(message):
+        if match := self.PATTERN.search(record.getMessage()):
             for listener in self.listeners:
                 listener.append((int(match.group(1)), match.group(2)))
-        return record.levelno >= logging.WARNING and not message.startswith(self.BENIGN)
+        return record.levelno >= logging.WARNING
 
 
 def worker_log_filter() -> _WorkerExits:
@@ -207,7 +206,8 @@ def worker_log_filter() -> _WorkerExits:
     if found is None:
         found = _WorkerExits()
         logger.addFilter(found)
-        logging.getLogger("distributed.scheduler").addFilter(found)
+        logging.getLogger("distributed.scheduler").addFilter(lambda record: not record.getMessage().startswith(
+            _WorkerExits.BENIGN))  # that one line only: the scheduler's others as Dask logs them
     return found
 
 

@@ -21,6 +21,8 @@ from ..raster.gbuffer import RECT_MAX_SHARE, RECT_PAD, screen_rect
 from ..scene import lights, shading
 from ..scene.snapshot import box_corners
 
+# A rectangle holding nothing (a region off screen or behind the camera): left out of unions.
+EMPTY = (0, 0, 0, 0)
 # The hull is grown by this share of its scale (and the region's radius by it): float64
 # rounding between the region's test and the projection, far below a pixel.
 SLACK = 1e-6
@@ -84,25 +86,30 @@ def _exit(start, axis, reach, spread, low, high) -> float:
 
 def hull_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
     """(x, y, w, h) pixels (row 0 at the bottom) holding the projection of the convex hull of
-    ``points`` (world) in front of the camera's near plane, grown by ``pad``; None when the
-    frame is better read whole (not finite, or over RECT_MAX_SHARE of it)."""
+    ``points`` (world) in front of the projection's near plane, grown by ``pad``; EMPTY when
+    none of it is on screen; None when the frame is better read whole (not finite, or over
+    RECT_MAX_SHARE of it)."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
     clip = np.c_[points, np.ones(len(points))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
     if not np.all(np.isfinite(clip)):
         return None
-    w = clip[:, 3]
-    near = float(camera.clip_start) if not camera.ortho else -np.inf
-    front = w >= near
+    # In front of the projection's own near plane (OpenGL clip space: z >= -w), the plane the
+    # raster clipped at (not ``camera.clip_start``, which a viewport may give differently).
+    ahead = clip[:, 2] + clip[:, 3]
+    front = ahead >= 0.0
     kept = [clip[front]]
     if not front.all() and front.any():
         # Where the hull's edges cross the near plane: every pair of a point in front and one
         # behind (the hull's edges are among them; the others cross inside the hull).
         a, b = clip[front], clip[~front]
-        t = (a[:, None, 3] - near) / (a[:, None, 3] - b[None, :, 3])
+        fa, fb = ahead[front], ahead[~front]
+        t = fa[:, None] / (fa[:, None] - fb[None, :])
         kept.append((a[:, None, :] + t[..., None] * (b[None, :, :] - a[:, None, :])).reshape(-1, 4))
     kept = np.concatenate(kept)
     if len(kept) == 0:
-        return 0, 0, min(1, int(width)), min(1, int(height))  # behind the camera: nothing on screen
+        return EMPTY  # behind the camera: nothing on screen
+    if np.any(kept[:, 3] <= 0.0):
+        return None  # a projection that is not a camera's: read whole
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ndc = kept[:, :2] / kept[:, 3:4]
     if not np.all(np.isfinite(ndc)):
@@ -113,17 +120,21 @@ def hull_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
     y0 = max(int(np.floor((ndc[:, 1].min() + 1.0) * 0.5 * height)) - pad, 0)
     y1 = min(int(np.ceil((ndc[:, 1].max() + 1.0) * 0.5 * height)) + pad, int(height))
     if x1 <= x0 or y1 <= y0:
-        return 0, 0, min(1, int(width)), min(1, int(height))  # off screen: one pixel
+        return EMPTY  # off screen
     if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
         return None
     return x0, y0, x1 - x0, y1 - y0
 
 
 def union_rect(rects, width: int, height: int):
-    """The rectangle holding every one of ``rects``; None when one is None (the whole frame) or
-    the union is over RECT_MAX_SHARE of the frame."""
+    """The rectangle holding every one of ``rects`` (EMPTY ones left out); None when one is None
+    (the whole frame) or the union is over RECT_MAX_SHARE of the frame; one pixel when all are
+    EMPTY."""
     if not rects or any(rect is None for rect in rects):
         return None
+    rects = [rect for rect in rects if rect[2] > 0 and rect[3] > 0]
+    if not rects:
+        return 0, 0, min(1, int(width)), min(1, int(height))
     x0 = min(rect[0] for rect in rects)
     y0 = min(rect[1] for rect in rects)
     x1 = max(rect[0] + rect[2] for rect in rects)

@@ -7,7 +7,7 @@ import pytest
 from phrt.phrt_addon.frame import FrameRenderer
 from phrt.phrt_addon.scene.snapshot import Light
 from phrt.phrt_addon.trace.shadow_region import ElementBounds, shadow_region
-from phrt.phrt_addon.trace.trace_rect import hull_rect, shadow_hull, union_rect
+from phrt.phrt_addon.trace.trace_rect import EMPTY, hull_rect, shadow_hull, union_rect
 
 from test_frame import HEIGHT, WIDTH, ReferenceRaster, camera, mirror_scene, render
 
@@ -86,11 +86,38 @@ def test_a_small_caster_in_front_of_the_camera_gives_a_small_rectangle():
     assert w * h < 0.2 * WIDTH * HEIGHT
     # A lamp inside the caster's bounding sphere: every point may be shadowed.
     assert shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.0, 0.0, 0.3)), box, scene) is None
-    # A hull wholly behind the camera: one pixel.
+    # A hull wholly behind the camera: nothing, left out of a union (not dragging it to a corner).
     behind = box[0] - [0, 20, 0], box[1] - [0, 20, 0]
-    assert hull_rect(view, np.array([behind[0], behind[1]]), WIDTH, HEIGHT) == (0, 0, 1, 1)
+    assert hull_rect(view, np.array([behind[0], behind[1]]), WIDTH, HEIGHT) == EMPTY
+    assert union_rect([EMPTY, (50, 40, 10, 10)], WIDTH, HEIGHT) == (50, 40, 10, 10)
+    assert union_rect([EMPTY], WIDTH, HEIGHT) == (0, 0, 1, 1)
     assert union_rect([(0, 0, 2, 2), None], WIDTH, HEIGHT) is None
     assert union_rect([(0, 0, 2, 2), (5, 6, 2, 2)], WIDTH, HEIGHT) == (0, 0, 7, 8)
+
+
+def test_the_near_plane_is_the_projection_s_not_clip_start():
+    """A viewport may give a camera whose ``clip_start`` (1 m) is not its projection's near plane
+    (0.1 m, what the raster clipped at): floor points 0.6-0.8 m away, in a lamp's shadow of a
+    small box, are drawn and must be inside the rectangle (found in review: they were not)."""
+    from phrt.phrt_addon.raster import shadowmap
+    from phrt.phrt_addon.scene.snapshot import Camera
+    eye, target = np.array([0.0, 0.0, 0.5]), np.array([0.0, 2.0, 0.0])
+    view_matrix = shadowmap.look_at(target - eye)
+    view_matrix[:3, 3] = -(view_matrix[:3, :3] @ eye)
+    view = Camera(matrix_world=np.linalg.inv(view_matrix), projection=shadowmap.perspective(np.radians(60), 0.1, 100.0),
+                  width=WIDTH, height=HEIGHT, clip_start=1.0, clip_end=100.0)
+    scene = (np.array([-5.0, -5.0, 0.0]), np.array([5.0, 10.0, 3.0]))
+    caster = (np.array([-0.5, 0.0, 0.6]), np.array([-0.3, 0.2, 0.8]))
+    lamp = Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(-0.5, -0.8, 2.8))
+    rect = hull_rect(view, shadow_hull(lamp, caster, scene), WIDTH, HEIGHT)
+    floor = np.stack(np.meshgrid(np.linspace(-5, 5, 401), np.linspace(-5, 10, 601), [0.0]), -1).reshape(-1, 3)
+    floor = floor[shadow_region(lamp, caster, floor)]
+    clip = np.c_[floor, np.ones(len(floor))] @ (view.projection @ view.view_matrix).T
+    x, y = (clip[:, 0] / clip[:, 3] + 1) * WIDTH / 2, (clip[:, 1] / clip[:, 3] + 1) * HEIGHT / 2
+    seen = (clip[:, 3] >= 0.1) & (x >= 0) & (x < WIDTH) & (y >= 0) & (y < HEIGHT)
+    assert seen.sum() > 20 and rect is not None
+    x0, y0, w, h = rect
+    assert np.all((x[seen] >= x0) & (x[seen] < x0 + w) & (y[seen] >= y0) & (y[seen] < y0 + h))
 
 
 def test_scene_bounds_hold_every_mesh():
