@@ -80,32 +80,66 @@ RECT_MAX_SHARE = 0.6
 
 def screen_rect(camera, boxes, width: int, height: int, pad: int = RECT_PAD):
     """(x, y, w, h) pixels (row 0 at the bottom) holding the projection of every world box
-    ``(low, high)`` of ``boxes``, grown by ``pad``; None when the frame is better read whole (a box
-    reaching behind the camera's plane or not finite, or the rectangle over RECT_MAX_SHARE of the
-    frame).  Every pixel a surface inside the boxes covers, in any layer, lies within it."""
+    ``(low, high)`` of ``boxes``, grown by ``pad``; one pixel when none is on screen; None when
+    the frame is better read whole (a box reaching behind the camera's plane or not finite, or
+    the rectangle over RECT_MAX_SHARE of the frame).  Every pixel a surface inside the boxes
+    covers, in any layer, lies within it."""
     boxes = [box for box in boxes if box is not None]
     if not boxes:
         return None
-    corners = box_corners([box[0] for box in boxes], [box[1] for box in boxes])
-    clip = np.c_[corners.reshape(-1, 3), np.ones(len(boxes) * 8)] @ (
-        np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
-    w = clip[:, 3]
-    if not np.all(np.isfinite(clip)) or np.any(w <= 0.0):
-        return None  # behind or on the camera's plane: the projection is unbounded
-    ndc = clip[:, :2] / w[:, None]
+    corners = box_corners([box[0] for box in boxes], [box[1] for box in boxes]).reshape(-1, 3)
+    w = np.c_[corners, np.ones(len(corners))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix)[3]
+    if not np.all(np.isfinite(w)) or np.any(w <= 0.0):
+        return None  # behind or on the camera's plane
+    rect = points_rect(camera, corners, width, height, pad)
+    return (0, 0, min(1, int(width)), min(1, int(height))) if rect == EMPTY else rect
+
+
+# A rectangle holding nothing (points off screen or behind the camera): left out of unions.
+EMPTY = (0, 0, 0, 0)
+
+
+def points_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
+    """(x, y, w, h) pixels (row 0 at the bottom) holding the projection of the convex hull of
+    ``points`` (world) in front of the projection's near plane, grown by ``pad``; EMPTY when
+    none of it is on screen; None when the frame is better read whole (not finite, or over
+    RECT_MAX_SHARE of it)."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    clip = np.c_[points, np.ones(len(points))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
+    if not np.all(np.isfinite(clip)):
+        return None
+    # In front of the projection's own near plane (OpenGL clip space: z >= -w), the plane the
+    # raster clipped at (not ``camera.clip_start``, which a viewport may give differently).
+    ahead = clip[:, 2] + clip[:, 3]
+    front = ahead >= 0.0
+    kept = [clip[front]]
+    if not front.all() and front.any():
+        # Where the hull's edges cross the near plane: every pair of a point in front and one
+        # behind (the hull's edges are among them; the others cross inside the hull).
+        a, b = clip[front], clip[~front]
+        fa, fb = ahead[front], ahead[~front]
+        t = fa[:, None] / (fa[:, None] - fb[None, :])
+        kept.append((a[:, None, :] + t[..., None] * (b[None, :, :] - a[:, None, :])).reshape(-1, 4))
+    kept = np.concatenate(kept)
+    if len(kept) == 0:
+        return EMPTY  # behind the camera: nothing on screen
+    if np.any(kept[:, 3] <= 0.0):
+        return None  # a projection that is not a camera's: read whole
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ndc = kept[:, :2] / kept[:, 3:4]
     if not np.all(np.isfinite(ndc)):
         return None
-    x0 = int(np.floor((ndc[:, 0].min() + 1.0) * 0.5 * width)) - pad
-    x1 = int(np.ceil((ndc[:, 0].max() + 1.0) * 0.5 * width)) + pad
-    y0 = int(np.floor((ndc[:, 1].min() + 1.0) * 0.5 * height)) - pad
-    y1 = int(np.ceil((ndc[:, 1].max() + 1.0) * 0.5 * height)) + pad
-    x0, x1 = max(x0, 0), min(x1, int(width))
-    y0, y1 = max(y0, 0), min(y1, int(height))
+    ndc = np.clip(ndc, -4.0, 4.0)  # beyond the frame either way (ints stay small)
+    x0 = max(int(np.floor((ndc[:, 0].min() + 1.0) * 0.5 * width)) - pad, 0)
+    x1 = min(int(np.ceil((ndc[:, 0].max() + 1.0) * 0.5 * width)) + pad, int(width))
+    y0 = max(int(np.floor((ndc[:, 1].min() + 1.0) * 0.5 * height)) - pad, 0)
+    y1 = min(int(np.ceil((ndc[:, 1].max() + 1.0) * 0.5 * height)) + pad, int(height))
     if x1 <= x0 or y1 <= y0:
-        x0, y0, x1, y1 = 0, 0, min(1, int(width)), min(1, int(height))  # nothing on screen: one pixel
+        return EMPTY  # off screen
     if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
         return None
     return x0, y0, x1 - x0, y1 - y0
+
 
 
 @dataclass

@@ -95,9 +95,8 @@ KEEP_SMOOTHING = 0.1
 KEEP_RANGE = (0.25, 1.0)  # a share learned near 0 would never be tried again
 # A traced frame measures what its items changed (the GPU's change read back costs ms): when it
 # traces an item never measured or at another rate than at its last measurement; MEASURE_EVERY
-# frames after the last measurement when the time
-# its items leave pays the measurement's learned cost (frame_time.MeasureCost); MEASURE_STALE
-# frames after it in any case.
+# frames after the last measurement when the time its items leave pays the measurement's learned
+# cost (frame_time.MeasureCost); MEASURE_STALE frames after it in any case.
 MEASURE_EVERY = 2
 MEASURE_STALE = 8
 # The material priors are recomputed (the layers read before the selection) every PRIOR_EVERY

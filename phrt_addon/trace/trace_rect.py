@@ -2,8 +2,8 @@
 that the read-back before tracing and the trace stage need.
 
 Reflections and refractions leave from their elements' own pixels: the projection of those
-elements' bounds (``gbuffer.screen_rect``).  A shadow changes the receivers in its caster's
-shadow region (``shadow_region.shadow_region``: a cylinder downstream of the caster for the sun,
+elements' bounds (``gbuffer.points_rect`` of their corners).  A shadow changes the receivers in
+its caster's shadow region (``shadow_region.shadow_region``: a cylinder downstream of the caster for the sun,
 a cone from a local light), which is unbounded; but a receiver is a surface of the scene, so
 it lies in the scene's bounds, and within them the region is held by a convex hull of 16
 points (two boxes across the cylinder or the cone, at its near and far ends).  The hull is
@@ -17,12 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..raster.gbuffer import RECT_MAX_SHARE, RECT_PAD, screen_rect
+from ..raster.gbuffer import EMPTY, RECT_MAX_SHARE, points_rect
 from ..scene import lights, shading
 from ..scene.snapshot import box_corners
 
-# A rectangle holding nothing (a region off screen or behind the camera): left out of unions.
-EMPTY = (0, 0, 0, 0)
 # The hull is grown by this share of its scale (and the region's radius by it): float64
 # rounding between the region's test and the projection, far below a pixel.
 SLACK = 1e-6
@@ -84,48 +82,6 @@ def _exit(start, axis, reach, spread, low, high) -> float:
     return float(min(t, exits.min())) if len(exits) else t
 
 
-def hull_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
-    """(x, y, w, h) pixels (row 0 at the bottom) holding the projection of the convex hull of
-    ``points`` (world) in front of the projection's near plane, grown by ``pad``; EMPTY when
-    none of it is on screen; None when the frame is better read whole (not finite, or over
-    RECT_MAX_SHARE of it)."""
-    points = np.asarray(points, np.float64).reshape(-1, 3)
-    clip = np.c_[points, np.ones(len(points))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
-    if not np.all(np.isfinite(clip)):
-        return None
-    # In front of the projection's own near plane (OpenGL clip space: z >= -w), the plane the
-    # raster clipped at (not ``camera.clip_start``, which a viewport may give differently).
-    ahead = clip[:, 2] + clip[:, 3]
-    front = ahead >= 0.0
-    kept = [clip[front]]
-    if not front.all() and front.any():
-        # Where the hull's edges cross the near plane: every pair of a point in front and one
-        # behind (the hull's edges are among them; the others cross inside the hull).
-        a, b = clip[front], clip[~front]
-        fa, fb = ahead[front], ahead[~front]
-        t = fa[:, None] / (fa[:, None] - fb[None, :])
-        kept.append((a[:, None, :] + t[..., None] * (b[None, :, :] - a[:, None, :])).reshape(-1, 4))
-    kept = np.concatenate(kept)
-    if len(kept) == 0:
-        return EMPTY  # behind the camera: nothing on screen
-    if np.any(kept[:, 3] <= 0.0):
-        return None  # a projection that is not a camera's: read whole
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        ndc = kept[:, :2] / kept[:, 3:4]
-    if not np.all(np.isfinite(ndc)):
-        return None
-    ndc = np.clip(ndc, -4.0, 4.0)  # beyond the frame either way (ints stay small)
-    x0 = max(int(np.floor((ndc[:, 0].min() + 1.0) * 0.5 * width)) - pad, 0)
-    x1 = min(int(np.ceil((ndc[:, 0].max() + 1.0) * 0.5 * width)) + pad, int(width))
-    y0 = max(int(np.floor((ndc[:, 1].min() + 1.0) * 0.5 * height)) - pad, 0)
-    y1 = min(int(np.ceil((ndc[:, 1].max() + 1.0) * 0.5 * height)) + pad, int(height))
-    if x1 <= x0 or y1 <= y0:
-        return EMPTY  # off screen
-    if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
-        return None
-    return x0, y0, x1 - x0, y1 - y0
-
-
 def union_rect(rects, width: int, height: int):
     """The rectangle holding every one of ``rects`` (EMPTY ones left out); None when one is None
     (the whole frame) or the union is over RECT_MAX_SHARE of the frame; one pixel when all are
@@ -149,8 +105,10 @@ def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int,
     ``stage.traced_effects``) can change or cast rays from, or None (read the whole frame)."""
     rects = []
     leaving = np.flatnonzero(wanted["reflections"] | wanted["refractions"])
-    if len(leaving):
-        rects.append(screen_rect(snapshot.camera, [element_bounds[i] for i in leaving], width, height))
+    boxes = [element_bounds[i] for i in leaving if element_bounds[i] is not None]
+    if boxes:
+        rects.append(points_rect(snapshot.camera, box_corners([box[0] for box in boxes], [box[1] for box in boxes]),
+                                 width, height))
     casters = [i for i in np.flatnonzero(wanted["shadows"]) if element_bounds[i] is not None]
     shadow_lights = [light for light in snapshot.lights if light.cast_shadows]
     if casters and shadow_lights:
@@ -159,7 +117,7 @@ def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int,
         for light in shadow_lights:
             for caster in casters:
                 hull = shadow_hull(light, element_bounds[caster], scene_bounds)
-                rects.append(None if hull is None else hull_rect(snapshot.camera, hull, width, height))
+                rects.append(None if hull is None else points_rect(snapshot.camera, hull, width, height))
                 if rects[-1] is None:
                     return None
     return union_rect(rects, width, height) if rects else None

@@ -7,7 +7,8 @@ import pytest
 from phrt.phrt_addon.frame import FrameRenderer
 from phrt.phrt_addon.scene.snapshot import Light
 from phrt.phrt_addon.trace.shadow_region import ElementBounds, shadow_region
-from phrt.phrt_addon.trace.trace_rect import EMPTY, hull_rect, shadow_hull, union_rect
+from phrt.phrt_addon.raster.gbuffer import EMPTY, points_rect
+from phrt.phrt_addon.trace.trace_rect import shadow_hull, union_rect
 
 from test_frame import HEIGHT, WIDTH, ReferenceRaster, camera, mirror_scene, render
 
@@ -66,7 +67,7 @@ def test_every_region_point_of_the_scene_projects_inside_the_rectangle():
         if hull is None:
             assert light.kind != "SUN"
             continue
-        rect = hull_rect(view, hull, WIDTH, HEIGHT)
+        rect = points_rect(view, hull, WIDTH, HEIGHT)
         x, y, front = _pixels(view, points)
         seen = front & (x >= 0) & (x < WIDTH) & (y >= 0) & (y < HEIGHT)
         if rect is None:
@@ -82,13 +83,13 @@ def test_a_small_caster_in_front_of_the_camera_gives_a_small_rectangle():
     box = (np.array([-0.3, -0.3, 0.0]), np.array([0.3, 0.3, 0.6]))
     scene = (np.array([-20.0, -20.0, 0.0]), np.array([20.0, 20.0, 5.0]))
     sun = Light("Sun", "SUN", (1.0, 1.0, 1.0), direction=(0.3, 0.4, -1.0))
-    x0, y0, w, h = hull_rect(view, shadow_hull(sun, box, scene), WIDTH, HEIGHT)
+    x0, y0, w, h = points_rect(view, shadow_hull(sun, box, scene), WIDTH, HEIGHT)
     assert w * h < 0.2 * WIDTH * HEIGHT
     # A lamp inside the caster's bounding sphere: every point may be shadowed.
     assert shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.0, 0.0, 0.3)), box, scene) is None
     # A hull wholly behind the camera: nothing, left out of a union (not dragging it to a corner).
     behind = box[0] - [0, 20, 0], box[1] - [0, 20, 0]
-    assert hull_rect(view, np.array([behind[0], behind[1]]), WIDTH, HEIGHT) == EMPTY
+    assert points_rect(view, np.array([behind[0], behind[1]]), WIDTH, HEIGHT) == EMPTY
     assert union_rect([EMPTY, (50, 40, 10, 10)], WIDTH, HEIGHT) == (50, 40, 10, 10)
     assert union_rect([EMPTY], WIDTH, HEIGHT) == (0, 0, 1, 1)
     assert union_rect([(0, 0, 2, 2), None], WIDTH, HEIGHT) is None
@@ -109,7 +110,7 @@ def test_the_near_plane_is_the_projection_s_not_clip_start():
     scene = (np.array([-5.0, -5.0, 0.0]), np.array([5.0, 10.0, 3.0]))
     caster = (np.array([-0.5, 0.0, 0.6]), np.array([-0.3, 0.2, 0.8]))
     lamp = Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(-0.5, -0.8, 2.8))
-    rect = hull_rect(view, shadow_hull(lamp, caster, scene), WIDTH, HEIGHT)
+    rect = points_rect(view, shadow_hull(lamp, caster, scene), WIDTH, HEIGHT)
     floor = np.stack(np.meshgrid(np.linspace(-5, 5, 401), np.linspace(-5, 10, 601), [0.0]), -1).reshape(-1, 3)
     floor = floor[shadow_region(lamp, caster, floor)]
     clip = np.c_[floor, np.ones(len(floor))] @ (view.projection @ view.view_matrix).T
