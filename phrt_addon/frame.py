@@ -338,25 +338,26 @@ class FrameRenderer:
 
     @staticmethod
     def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
-        front = np.asarray(raster.front_element)
         n = len(snapshot.elements)
-        # Ids beyond the element list (a corrupt read-back) are no element (index n: the 0 flag).
-        index = np.where((front >= 0) & (front < n), front, n)
-        candidate_flags = np.r_[candidate, False].astype(np.float32)
-        selected_flags = np.r_[np.asarray(selected, bool), False].astype(np.float32)
+        # One key per pixel: 0 no element, 1..n the elements; ids beyond the list (a corrupt
+        # read-back) clip to n + 1, no element too (the tables' last 0).
+        key = np.asarray(raster.front_element).astype(np.int64)
+        key += 1
+        np.minimum(key.view(np.uint64), np.uint64(n + 1), out=key.view(np.uint64))
+        candidate_flags = np.r_[False, candidate, False].astype(np.float32)
+        selected_flags = np.r_[False, np.asarray(selected, bool), False].astype(np.float32)
         depth = np.where(np.isfinite(raster.view_depth), raster.view_depth, np.float32(1e10)).astype(np.float32,
                                                                                                     copy=False)
         if combined is not None:  # None: the image stayed on the GPU (the viewport draws it there)
             combined = shading.finite_rgba(combined)  # the read-back is this frame's own: made finite in place
-        element = index.astype(np.float32) + np.float32(1.0)
-        element[index == n] = 0.0
+        element_ids = np.r_[0.0, np.arange(1, n + 1), 0.0].astype(np.float32)  # 1-based, 0: none
         return FramePasses(
             combined=combined,
             depth=depth,
             normal=clamp_finite(np.asarray(raster.front_normal, np.float32)),
-            selected=selected_flags[index],
-            candidate=candidate_flags[index],
-            element=element,
+            selected=selected_flags[key],
+            candidate=candidate_flags[key],
+            element=element_ids[key],
         )
 
     def _shadow_footprints(self, raster, snapshot, element_bounds, area_px):

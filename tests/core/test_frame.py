@@ -294,3 +294,20 @@ def test_layer_pixels_gather_on_demand_what_the_whole_gather_gives():
     np.testing.assert_array_equal(lights.world(halves[1]), whole.world()[halves[1]])
     assert "world" in lights._cache
     np.testing.assert_array_equal(lights.world(halves[2]), whole.world()[halves[2]])
+
+
+def test_id_passes_read_each_pixels_element_and_leave_out_ids_beyond_the_list():
+    """The element, candidate and selected passes: 1-based element ids, 0 where no element or
+    an id the element list does not have (a corrupt read-back, negative or beyond it)."""
+    from types import SimpleNamespace
+    from phrt.phrt_addon.frame import FrameRenderer
+    front = np.array([[-1, 0, 1, 2], [3, 4, -7, 2**40]], np.int64)
+    raster = SimpleNamespace(front_element=front, view_depth=np.array([[1.0, np.inf, 2.0, np.nan]] * 2, np.float32),
+                             front_normal=np.zeros((2, 4, 3), np.float32))
+    snapshot = SimpleNamespace(elements=[None] * 3)
+    passes = FrameRenderer._passes(snapshot, raster, None, np.array([False, True, True]),
+                                   np.array([True, False, True]))
+    np.testing.assert_array_equal(passes.element, [[0, 1, 2, 3], [0, 0, 0, 0]])
+    np.testing.assert_array_equal(passes.candidate, [[0, 1, 0, 1], [0, 0, 0, 0]])
+    np.testing.assert_array_equal(passes.selected, [[0, 0, 1, 1], [0, 0, 0, 0]])
+    assert passes.element.dtype == np.float32 and np.isfinite(passes.depth).all()
