@@ -339,8 +339,7 @@ class FrameRenderer:
     @staticmethod
     def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
         n = len(snapshot.elements)
-        # One key per pixel: 0 no element, 1..n the elements; ids beyond the list (a corrupt
-        # read-back) clip to n + 1, no element too (the tables' last 0).
+        # One key per pixel: 0 no element, 1..n the elements, n + 1 an id beyond them (corrupt).
         key = np.asarray(raster.front_element).astype(np.int64)
         key += 1
         np.minimum(key.view(np.uint64), np.uint64(n + 1), out=key.view(np.uint64))
