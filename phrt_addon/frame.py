@@ -201,7 +201,7 @@ class FrameRenderer:
             frame_elements.names, choice, self.frames_rendered)))
         combined = raster.shade(traced, measure_change=measure)
         # The passes made from the image are frame work: timed with the composite (no stage held them).
-        passes = self._passes(snapshot, raster, combined, selected, candidate)
+        passes = self.frame_passes(snapshot, raster, combined, selected, candidate)
         # PHRT Rate: per pixel the rate its traced terms came at (0: raster), rows bottom to top.
         passes.rate = np.zeros((raster.height, raster.width), np.float32) if traced_frame.rate is None else traced_frame.rate
         passes.effect_rate = traced_frame.effect_rate or None
@@ -337,7 +337,7 @@ class FrameRenderer:
             item_rate=np.where(selected, np.min(np.where(chosen, choice.rate, np.inf), axis=1), 0.0))
 
     @staticmethod
-    def _passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
+    def frame_passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
         n = len(snapshot.elements)
         # One key per pixel: 0 no element, 1..n the elements, n + 1 an id beyond them (corrupt).
         key = np.asarray(raster.front_element).astype(np.int64)

@@ -305,7 +305,7 @@ def test_id_passes_read_each_pixels_element_and_leave_out_ids_beyond_the_list():
     raster = SimpleNamespace(front_element=front, view_depth=np.array([[1.0, np.inf, 2.0, np.nan]] * 2, np.float32),
                              front_normal=np.zeros((2, 4, 3), np.float32))
     snapshot = SimpleNamespace(elements=[None] * 3)
-    passes = FrameRenderer._passes(snapshot, raster, None, np.array([False, True, True]),
+    passes = FrameRenderer.frame_passes(snapshot, raster, None, np.array([False, True, True]),
                                    np.array([True, False, True]))
     np.testing.assert_array_equal(passes.element, [[0, 1, 2, 3], [0, 0, 0, 0]])
     np.testing.assert_array_equal(passes.candidate, [[0, 1, 0, 1], [0, 0, 0, 0]])
