@@ -339,7 +339,7 @@ class FrameRenderer:
     @staticmethod
     def frame_passes(snapshot, raster, combined, selected, candidate) -> FramePasses:
         n = len(snapshot.elements)
-        # One key per pixel: 0 no element, 1..n the elements, n + 1 an id beyond them (corrupt).
+        # One key per pixel: 0 no element, 1..n the elements, n + 1 any other id (a corrupt one).
         key = np.asarray(raster.front_element).astype(np.int64)
         key += 1
         np.minimum(key.view(np.uint64), np.uint64(n + 1), out=key.view(np.uint64))

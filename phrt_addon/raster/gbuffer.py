@@ -232,7 +232,7 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     (-1..1) and mean view depth of its pixels (its finite depths).
 
     Whole-array numpy: one key per pixel, cut into runs of one key along each row (an id
-    image is a few thousand runs: sums per run, then per element, 6x faster than per pixel),
+    image is a few thousand runs: sums per run, then per element; 2.4 -> 0.9 ms at 320x240),
     or four bincounts over the pixels when runs are not much fewer (noise); elements with no
     pixels get count 0, centroid (0, 0) and depth inf.  This is the exact "area in the view plane" of
     the paper's A, measured rather than estimated from bounds.  ``grid`` (a ``PixelGrid``,
@@ -250,6 +250,8 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     np.minimum(unsigned, np.uint64(n_elements + 1), out=unsigned)
     size = n_elements + 2
     depth_values = np.asarray(view_depth).ravel()
+    if depth_values.size != key.size:
+        raise ValueError(f"view depth has {depth_values.size} values for {key.size} pixels")
     runs = row_runs(key, width)
     if runs is not None:  # sums over runs of one id along a row (a coherent image: a few thousand)
         starts, lengths = runs

@@ -38,7 +38,7 @@ def test_element_pixel_stats_match_a_per_element_count(n, height, width):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_a_coherent_image_summed_over_itsrow_runs_matches_a_per_element_count(seed):
+def test_a_coherent_image_summed_over_its_row_runs_matches_a_per_element_count(seed):
     """An element-id image is made of runs along rows (the fast path): rectangles and discs of
     ids over a background, depths with holes, one element's runs touching the row ends."""
     rng = np.random.default_rng(seed)
@@ -53,10 +53,10 @@ def test_a_coherent_image_summed_over_itsrow_runs_matches_a_per_element_count(se
         else:
             centre, radius = rng.uniform(0, [height, width]), rng.uniform(2, max(height, width) / 2)
             image[(rows - centre[0]) ** 2 + (columns - centre[1]) ** 2 < radius ** 2] = element
-    image[:, -1] = image[:, 0]  # a run ending a row and one starting the next have the same id
+    image[:-1, -1] = image[1:, 0]  # a run ending a row and the one starting the next: the same id
     depth = rng.uniform(0.5, 50.0, size=(height, width)).astype(np.float32)
     if seed % 2:
-        depth[rng.random((height, width)) < 0.02] = np.inf
+        depth[rng.random((height, width)) < 0.02] = np.inf if seed % 4 == 1 else np.nan
     from phrt.phrt_addon.raster import gbuffer
     key = np.minimum((image + 1).ravel().astype(np.int64).view(np.uint64), np.uint64(n + 1)).view(np.int64)
     assert gbuffer.row_runs(key, width) is not None  # the run path is the one tested

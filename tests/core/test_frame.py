@@ -310,4 +310,5 @@ def test_id_passes_read_each_pixels_element_and_leave_out_ids_beyond_the_list():
     np.testing.assert_array_equal(passes.element, [[0, 1, 2, 3], [0, 0, 0, 0]])
     np.testing.assert_array_equal(passes.candidate, [[0, 1, 0, 1], [0, 0, 0, 0]])
     np.testing.assert_array_equal(passes.selected, [[0, 0, 1, 1], [0, 0, 0, 0]])
-    assert passes.element.dtype == np.float32 and np.isfinite(passes.depth).all()
+    assert {passes.element.dtype, passes.candidate.dtype, passes.selected.dtype} == {np.dtype(np.float32)}
+    assert np.isfinite(passes.depth).all()

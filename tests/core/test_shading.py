@@ -277,6 +277,9 @@ def test_finite_rgba_clamps_bad_rgb_sets_alpha_and_keeps_a_clean_image_in_place(
     expected[..., 3] = 1.0
     expected[0, 0, 0], expected[0, 1, 1], expected[1, 0, 2], expected[2, 3, 0] = 0.0, 1e6, 0.0, 1e6
     np.testing.assert_array_equal(out, expected)
+    lone_nan = image.copy()
+    lone_nan[2, 2, 1] = np.nan  # a NaN alone (no other bad value to trip the test)
+    assert shading.finite_rgba(lone_nan)[2, 2, 1] == 0.0
     alpha_only = image.copy()
     alpha_only[1, 1, 3] = np.nan  # a bad alpha alone: replaced by 1, the colour untouched
     np.testing.assert_array_equal(shading.finite_rgba(alpha_only)[..., :3], image[..., :3])
