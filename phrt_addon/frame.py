@@ -42,7 +42,7 @@ from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
 from .trace.stage import TraceResult, TraceStage, traced_effects
-from .trace.trace_rect import trace_rect
+from .trace.trace_rect import ShadowHulls, trace_rect
 
 
 # Pixel sub-sampling step used to estimate each element's shadow footprint for the cost model.
@@ -76,7 +76,7 @@ class FrameRenderer:
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None;
         # with it, per effect name the rate every element's effect is traced at (tools/rate_flip.py).
         self.forced_selection = None
-        self.crop_readback = True  # a frame that traces reads back only the rectangle its effects change
+        self.crop_readback, self.shadow_hulls = True, ShadowHulls()  # read back what traced effects change
         self.forced_rates = None
         self.problems = ProblemLog()  # what this replay's snapshots skipped or approximated (engine/final.py)
 
@@ -187,7 +187,7 @@ class FrameRenderer:
                 begin, wanted = _timer(), traced_effects(snapshot.elements, selected, selection.effects)
                 layers = read_layers(self.ray_pixels(snapshot, selected, selection.effects), trace_rect(
                     snapshot, wanted, element_bounds, self.element_bounds.scene_bounds(snapshot), raster.width,
-                    raster.height) if self.crop_readback else None)
+                    raster.height, self.shadow_hulls) if self.crop_readback else None)
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
                                                 effects=selection.effects,

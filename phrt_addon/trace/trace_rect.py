@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..raster.gbuffer import EMPTY, RECT_MAX_SHARE, points_rect
+from ..raster.gbuffer import EMPTY, RECT_MAX_SHARE, RECT_PAD, points_rect
 from ..scene import lights, shading
 from ..scene.snapshot import box_corners
 
@@ -100,9 +100,10 @@ def union_rect(rects, width: int, height: int):
     return x0, y0, x1 - x0, y1 - y0
 
 
-def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int, height: int):
+def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int, height: int, hulls=None):
     """The rectangle holding every pixel the traced effects ``wanted`` ({effect: (n,) bool},
-    ``stage.traced_effects``) can change or cast rays from, or None (read the whole frame)."""
+    ``stage.traced_effects``) can change or cast rays from, or None (read the whole frame).
+    ``hulls``: a replay's ``ShadowHulls`` (None: each hull computed)."""
     rects = []
     leaving = np.flatnonzero(wanted["reflections"] | wanted["refractions"])
     boxes = [element_bounds[i] for i in leaving if element_bounds[i] is not None]
@@ -114,10 +115,79 @@ def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int,
     if casters and shadow_lights:
         if scene_bounds is None:
             return None
-        for light in shadow_lights:
-            for caster in casters:
-                hull = shadow_hull(light, element_bounds[caster], scene_bounds)
-                rects.append(None if hull is None else points_rect(snapshot.camera, hull, width, height))
-                if rects[-1] is None:
-                    return None
+        hull_of = hulls if hulls is not None else shadow_hull
+        hull_points = [hull_of(light, element_bounds[caster], scene_bounds)
+                       for light in shadow_lights for caster in casters]
+        if any(hull is None for hull in hull_points):
+            return None
+        rects.extend(points_rects(snapshot.camera, np.stack(hull_points), width, height))
     return union_rect(rects, width, height) if rects else None
+
+
+class ShadowHulls:
+    """``shadow_hull`` kept per replay for the values it depends on (the light's kind and
+    position or direction, the caster's and the scene's bounds): a static caster's and light's
+    hull is computed once, not every frame.  Hulls are read-only."""
+
+    MAX_KEPT = 4096  # moving casters or lights make new keys: then it starts over
+
+    def __init__(self):
+        self._hulls = {}
+
+    def __call__(self, light, bounds, scene_bounds):
+        kind = lights.kind(light)
+        key = (kind.name, _values(light.direction) if kind is lights.LightKind.SUN else _values(light.position),
+               _values(bounds[0]), _values(bounds[1]), _values(scene_bounds[0]), _values(scene_bounds[1]))
+        if key not in self._hulls:
+            if len(self._hulls) >= self.MAX_KEPT:
+                self._hulls.clear()
+            hull = shadow_hull(light, bounds, scene_bounds)
+            if hull is not None:
+                hull.flags.writeable = False
+            self._hulls[key] = hull
+        return self._hulls[key]
+
+
+def _values(vector) -> tuple:
+    return tuple(np.asarray(vector, np.float64).ravel().tolist())
+
+
+def points_rects(camera, point_sets, width: int, height: int, pad: int = RECT_PAD) -> list:
+    """``points_rect`` of each (k, 3) set of ``point_sets`` (P, k, 3), the same rectangles: the
+    sets wholly in front of the near plane projected in one product and measured together
+    (five lights' shadow hulls cost 1.2 ms one at a time), the others one at a time."""
+    sets = np.asarray(point_sets, np.float64)
+    if sets.ndim != 3 or sets.shape[0] == 0:
+        return []
+    n_sets, k = sets.shape[:2]
+    matrix = np.asarray(camera.projection, np.float64) @ camera.view_matrix
+    clip = (sets.reshape(-1, 3) @ matrix[:, :3].T + matrix[:, 3]).reshape(n_sets, k, 4)
+    with np.errstate(invalid="ignore"):
+        simple = np.isfinite(clip).all(axis=(1, 2)) & (clip[..., 2] + clip[..., 3] >= 0.0).all(axis=1) \
+            & (clip[..., 3] > 0.0).all(axis=1)
+    rects = [None if flag else points_rect(camera, sets[index], width, height, pad)
+             for index, flag in enumerate(simple.tolist())]
+    if not simple.any():
+        return rects
+    front = clip[simple]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ndc = front[..., :2] / front[..., 3:4]
+    finite = np.isfinite(ndc).all(axis=(1, 2))
+    ndc = np.clip(np.where(np.isfinite(ndc), ndc, 0.0), -4.0, 4.0)
+    low, high = ndc.min(axis=1), ndc.max(axis=1)
+    x0 = np.maximum(np.floor((low[:, 0] + 1.0) * 0.5 * width).astype(np.int64) - pad, 0)
+    x1 = np.minimum(np.ceil((high[:, 0] + 1.0) * 0.5 * width).astype(np.int64) + pad, int(width))
+    y0 = np.maximum(np.floor((low[:, 1] + 1.0) * 0.5 * height).astype(np.int64) - pad, 0)
+    y1 = np.minimum(np.ceil((high[:, 1] + 1.0) * 0.5 * height).astype(np.int64) + pad, int(height))
+    for index, ok, a, b, c, d in zip(np.flatnonzero(simple).tolist(), finite.tolist(), x0.tolist(), x1.tolist(),
+                                     y0.tolist(), y1.tolist()):
+        if not ok:
+            rects[index] = None
+        elif b <= a or d <= c:
+            rects[index] = EMPTY
+        elif (b - a) * (d - c) > RECT_MAX_SHARE * width * height:
+            rects[index] = None
+        else:
+            rects[index] = (a, c, b - a, d - c)
+    return rects
+

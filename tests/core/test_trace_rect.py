@@ -147,3 +147,48 @@ def test_a_frame_tracing_shadows_reads_back_a_rectangle_and_is_the_same_as_read_
     for key in ("shadow_rays", "reflection_rays", "rays"):
         assert whole.stats[key] == cropped.stats[key]
     np.testing.assert_array_equal(whole.passes.combined, cropped.passes.combined)
+
+
+def test_rectangles_projected_together_are_those_projected_one_by_one():
+    """``points_rects`` against ``points_rect`` for each set: hulls in front, straddling the near
+    plane, behind the camera, off screen, filling the frame, and non-finite."""
+    from phrt.phrt_addon.trace.trace_rect import points_rects
+    kinds = {"in front": 0, "straddling": 0, "empty": 0, "none": 0}
+    for seed in range(60):
+        rng = np.random.default_rng(seed)
+        eye = rng.uniform(-5, 5, 3)
+        view = camera(tuple(eye), tuple(eye + rng.normal(size=3)))
+        centres = eye + rng.normal(scale=rng.choice([0.3, 3.0, 30.0]), size=(12, 1, 3))
+        sets = centres + rng.normal(scale=rng.uniform(0.01, 4.0, size=(12, 1, 1)), size=(12, 16, 3))
+        if seed % 10 == 0:
+            sets[3, 5] = np.nan
+        together = points_rects(view, sets, WIDTH, HEIGHT)
+        alone = [points_rect(view, points, WIDTH, HEIGHT) for points in sets]
+        assert together == alone, seed
+        ahead = np.array([(np.c_[s, np.ones(16)] @ (view.projection @ view.view_matrix).T)[:, 2:].sum(axis=1)
+                          for s in np.nan_to_num(sets)])
+        kinds["straddling"] += int(np.sum((ahead >= 0).any(axis=1) & (ahead < 0).any(axis=1)))
+        kinds["in front"] += int(np.sum((ahead >= 0).all(axis=1)))
+        kinds["empty"] += sum(rect == EMPTY for rect in alone)
+        kinds["none"] += sum(rect is None for rect in alone)
+    assert min(kinds.values()) >= 10, kinds  # every case met, many times
+    assert points_rects(camera((0.0, -6.0, 2.0), (0.0, 0.0, 0.5)), np.zeros((0, 16, 3)), WIDTH, HEIGHT) == []
+
+
+def test_a_shadow_hull_is_kept_for_its_light_caster_and_scene():
+    from phrt.phrt_addon.trace.trace_rect import ShadowHulls
+    cached_shadow_hull = ShadowHulls()
+    box = (np.array([-0.3, -0.3, 0.0]), np.array([0.3, 0.3, 0.6]))
+    scene = (np.array([-20.0, -20.0, 0.0]), np.array([20.0, 20.0, 5.0]))
+    lamp = Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(2.0, 1.0, 3.0))
+    first = cached_shadow_hull(lamp, box, scene)
+    np.testing.assert_array_equal(first, shadow_hull(lamp, box, scene))
+    again = cached_shadow_hull(Light("Lamp", "POINT", (0.5, 0.5, 0.5), position=(2.0, 1.0, 3.0)), box, scene)
+    assert again is first and not first.flags.writeable  # same values: the same hull, not recomputed
+    moved = cached_shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(2.0, 1.0, 3.5)), box, scene)
+    np.testing.assert_array_equal(moved, shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(2.0, 1.0, 3.5)),
+                                                     box, scene))
+    assert not np.array_equal(moved, first)
+    sun = Light("Sun", "SUN", (1.0, 1.0, 1.0), direction=(2.0, 1.0, 3.0))  # same numbers, another kind
+    assert not np.array_equal(cached_shadow_hull(sun, box, scene), first)
+    assert cached_shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.0, 0.0, 0.3)), box, scene) is None
