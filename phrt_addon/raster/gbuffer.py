@@ -105,7 +105,8 @@ def points_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
     none of it is on screen; None when the frame is better read whole (not finite, or over
     RECT_MAX_SHARE of it)."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
-    clip = np.c_[points, np.ones(len(points))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
+    with np.errstate(invalid="ignore", over="ignore"):  # an infinite point: not finite, read whole
+        clip = np.c_[points, np.ones(len(points))] @ (np.asarray(camera.projection, np.float64) @ camera.view_matrix).T
     if not np.all(np.isfinite(clip)):
         return None
     # In front of the projection's own near plane (OpenGL clip space: z >= -w), the plane the

@@ -157,12 +157,14 @@ def points_rects(camera, point_sets, width: int, height: int, pad: int = RECT_PA
     sets wholly in front of the near plane projected in one product and measured together
     (five lights' shadow hulls cost 1.2 ms one at a time), the others one at a time."""
     sets = np.asarray(point_sets, np.float64)
-    if sets.ndim != 3 or sets.shape[0] == 0:
-        return []
+    if sets.ndim != 3 or sets.shape[2] != 3:
+        raise ValueError(f"point sets of shape {sets.shape}, expected (sets, points, 3)")
     n_sets, k = sets.shape[:2]
+    if n_sets == 0 or k == 0:
+        return [EMPTY] * n_sets  # no point: nothing on screen (as points_rect)
     matrix = np.asarray(camera.projection, np.float64) @ camera.view_matrix
-    clip = (sets.reshape(-1, 3) @ matrix[:, :3].T + matrix[:, 3]).reshape(n_sets, k, 4)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):  # an infinite point: not finite, read whole
+        clip = (sets.reshape(-1, 3) @ matrix[:, :3].T + matrix[:, 3]).reshape(n_sets, k, 4)
         simple = np.isfinite(clip).all(axis=(1, 2)) & (clip[..., 2] + clip[..., 3] >= 0.0).all(axis=1) \
             & (clip[..., 3] > 0.0).all(axis=1)
     rects = [None if flag else points_rect(camera, sets[index], width, height, pad)

@@ -172,7 +172,23 @@ def test_rectangles_projected_together_are_those_projected_one_by_one():
         kinds["empty"] += sum(rect == EMPTY for rect in alone)
         kinds["none"] += sum(rect is None for rect in alone)
     assert min(kinds.values()) >= 10, kinds  # every case met, many times
-    assert points_rects(camera((0.0, -6.0, 2.0), (0.0, 0.0, 0.5)), np.zeros((0, 16, 3)), WIDTH, HEIGHT) == []
+    view = camera((0.0, -6.0, 2.0), (0.0, 0.0, 0.5))
+    assert points_rects(view, np.zeros((0, 16, 3)), WIDTH, HEIGHT) == []
+    assert points_rects(view, np.zeros((2, 0, 3)), WIDTH, HEIGHT) == [EMPTY, EMPTY] == [
+        points_rect(view, np.zeros((0, 3)), WIDTH, HEIGHT)] * 2
+    with pytest.raises(ValueError):
+        points_rects(view, np.zeros((16, 3)), WIDTH, HEIGHT)
+    # Projections that are not a camera's (w <= 0 in front of the near plane, w = 0), infinite
+    # points, another pad: still points_rect's answers.
+    from types import SimpleNamespace
+    for seed in range(40):
+        rng = np.random.default_rng(100 + seed)
+        odd = SimpleNamespace(projection=rng.normal(size=(4, 4)), view_matrix=np.eye(4))
+        sets = rng.normal(scale=3.0, size=(6, 16, 3))
+        sets[0, 0] = np.inf
+        sets[1] = sets[1] * np.array([1.0, 1.0, 0.0])  # a plane of points
+        pad = int(rng.integers(0, 5))
+        assert points_rects(odd, sets, WIDTH, HEIGHT, pad) == [points_rect(odd, s, WIDTH, HEIGHT, pad) for s in sets]
 
 
 def test_a_shadow_hull_is_kept_for_its_light_caster_and_scene():
@@ -191,4 +207,9 @@ def test_a_shadow_hull_is_kept_for_its_light_caster_and_scene():
     assert not np.array_equal(moved, first)
     sun = Light("Sun", "SUN", (1.0, 1.0, 1.0), direction=(2.0, 1.0, 3.0))  # same numbers, another kind
     assert not np.array_equal(cached_shadow_hull(sun, box, scene), first)
+    other_sun = Light("Sun", "SUN", (1.0, 1.0, 1.0), direction=(-1.0, 0.5, -3.0), position=(2.0, 1.0, 3.0))
+    np.testing.assert_array_equal(cached_shadow_hull(other_sun, box, scene), shadow_hull(other_sun, box, scene))
+    for other_box, other_scene in [((box[0] + 0.5, box[1] + 0.5), scene), (box, (scene[0], scene[1] + 3.0))]:
+        np.testing.assert_array_equal(cached_shadow_hull(lamp, other_box, other_scene),
+                                      shadow_hull(lamp, other_box, other_scene))
     assert cached_shadow_hull(Light("Lamp", "POINT", (1.0, 1.0, 1.0), position=(0.0, 0.0, 0.3)), box, scene) is None
