@@ -15,7 +15,22 @@ from typing import Protocol
 import numpy as np
 
 from .scene import shading
-from .raster.gbuffer import GBuffer, geometric_normals
+from .raster.gbuffer import GBuffer
+from .raster.normals import geometric_normals
+
+
+def rows_of(array: np.ndarray, index) -> np.ndarray:
+    """``array[index]`` along the first axis: ``np.take`` / ``np.compress`` for an index array
+    (of (n, 3) rows several times faster than numpy's fancy indexing); a mask of another
+    length is an error, as it is for ``array[mask]``."""
+    if isinstance(index, slice):
+        return array[index]
+    index = np.asarray(index)
+    if index.dtype == bool:
+        if index.shape != array.shape[:1]:
+            raise IndexError(f"a mask of {index.shape} over {array.shape[0]} rows")
+        return np.compress(index, array, axis=0)
+    return np.take(array, index, axis=0)
 
 
 class RasterFrame(Protocol):
@@ -112,14 +127,14 @@ class LayerPixels:
         makes the whole gather (kept)."""
         whole = self._cache.get(name)
         if whole is not None:
-            return whole[index]
+            return rows_of(whole, index)
         image = getattr(self.layer, name)
         values = image.reshape(image.shape[0] * image.shape[1], -1) if image.ndim == 3 else image.reshape(-1)
         rows = None if isinstance(index, slice) and index == slice(None) else self.flat[index]
         if rows is None or 4 * len(rows) > len(self.flat):  # much of the layer: gathered whole, kept
-            self._cache[name] = whole = values[self.flat]
-            return whole[index]
-        return values[rows]
+            self._cache[name] = whole = np.take(values, self.flat, axis=0)
+            return rows_of(whole, index)
+        return np.take(values, rows, axis=0)  # rows of (n, 3): several times faster than values[rows]
 
     @property
     def position(self) -> np.ndarray:
@@ -149,13 +164,13 @@ class LayerPixels:
         are made once and kept: the lights after that share them."""
         whole = self._cache.get("world")
         if whole is not None:
-            return whole[index]
+            return rows_of(whole, index)
         if isinstance(index, slice) and index == slice(None):
             whole = self._cache["world"] = self._gathered("position").astype(np.float64) + self.origin
             return whole
         asked = self._cache["world_asked"] = self._cache.get("world_asked", 0) + len(self.flat[index])
         if 2 * asked > len(self.flat):
-            return self.world()[index]
+            return rows_of(self.world(), index)
         return self._gathered("position", index).astype(np.float64) + self.origin
 
     def view_directions(self, index=slice(None)) -> np.ndarray:

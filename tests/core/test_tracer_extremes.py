@@ -12,7 +12,8 @@ from phrt.phrt_addon.raster import shadowmap
 from phrt.phrt_addon.trace import embree_scene, tracer
 from phrt.phrt_addon.frame import FrameRenderer
 from phrt.phrt_addon.raster.reference_raster import ReferenceRaster
-from phrt.phrt_addon.raster.gbuffer import GBuffer, GBufferLayer, geometric_normals
+from phrt.phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
+from phrt.phrt_addon.raster.normals import geometric_normals
 from phrt.phrt_addon.scene.snapshot import Camera, Element, Light, Material, SceneSnapshot, Settings
 
 from test_tracer import (GLASS, MIRROR, box, build, diffuse, emissive, quad, snapshot, translation,  # noqa: E402
