@@ -9,10 +9,11 @@ from __future__ import annotations
 import numpy as np
 
 
-def finite(values, nan: float = 0.0, posinf: float | None = None, neginf: float | None = None) -> np.ndarray:
-    """``np.nan_to_num(values, nan=nan, posinf=posinf, neginf=neginf)`` as float64; no copy when
-    every value is finite already."""
-    array = np.asarray(values, dtype=np.float64)
+def finite(values, nan: float = 0.0, posinf: float | None = None, neginf: float | None = None,
+           dtype=np.float64) -> np.ndarray:
+    """``np.nan_to_num(values, nan=nan, posinf=posinf, neginf=neginf)`` as ``dtype`` (float64);
+    no copy when every value is finite already."""
+    array = np.asarray(values, dtype=dtype)
     if np.isfinite(array).all():
         return array
     return np.nan_to_num(array, nan=nan, posinf=posinf, neginf=neginf)

@@ -38,6 +38,7 @@ from .scene import shading
 from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
 from .raster.gbuffer import PixelGrid, element_pixel_stats, front_points
+from .finite import finite
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.shadow_region import ElementBounds, ShadowRegionIndex
@@ -65,7 +66,7 @@ class FrameRenderer:
         self.cost_model = None
         self.previous_selection = {}
         self.trace_stage = TraceStage(threads)
-        self.frames_rendered = 0
+        self.frames_rendered = self.traced_frames = 0
         self.element_bounds = ElementBounds()
         self.pixel_grid = PixelGrid()  # the pixel coordinates of element_pixel_stats, kept per size
         # The error-aware relevance's per-element estimates (phrt_addon/select/benefit.py).
@@ -194,6 +195,10 @@ class FrameRenderer:
                                                 rates=choice.rates if choice is not None else self._forced_rates(n_elements))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
+        # A replay's first traced frame imports the tracer and warms its buffers: one-time work no cost,
+        # overhead or margin learns (atrium path1 at 0.25: a 54 ms overhead, no time to trace after it).
+        warm = traced is not None and self.traced_frames > 0
+        self.traced_frames += traced is not None
 
         # -- lighting and composite (GPU) -----------------------------------------
         start = _timer()
@@ -217,11 +222,11 @@ class FrameRenderer:
             start = _timer()
             measured = item_benefit.measure(snapshot, layers, raster.traced_change(), traced, choice.chosen,
                                             element_bounds) if measure else None
-            if traced is not None and self.frames_rendered > 0 and shade_setup_ms == 0.0:  # what measuring costs
+            if warm and shade_setup_ms == 0.0:  # what measuring costs
                 self.benefit_selector.observe_measure_cost(measure, composite_ms + (_ms(start) if measure else 0.0))
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
             self.item_costs.tick(choice.eligible.any(axis=0), choice.chosen.any(axis=0) & (traced is not None))
-            if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
+            if warm:
                 if self.cost_model.trace_overhead_ms() > 0 and self.item_costs.measured(choice.chosen):
                     self.benefit_selector.observe_time(selection.predicted_trace_ms,
                                                        max(trace_ms - counters.upload_ms, 0.0))
@@ -251,10 +256,10 @@ class FrameRenderer:
         self.cost_model.observe(FrameStats(
             raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
             composite_ms=None if shade_setup_ms > 0 else composite_ms,
-            trace_ms=max(trace_ms - counters.upload_ms, 0.0) if np.any(selected) else None,
+            trace_ms=max(trace_ms - counters.upload_ms, 0.0) if warm else None,
             # The layers' read-back, the scene update, the uploads of the results: no effect's.
             trace_overhead_ms=max(trace_ms - counters.upload_ms - counters.shadow_ms - counters.reflection_ms
-                                  - counters.refraction_ms, 0.0) if np.any(selected) and may_trace else None,
+                                  - counters.refraction_ms, 0.0) if warm else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,
@@ -353,7 +358,7 @@ class FrameRenderer:
         return FramePasses(
             combined=combined,
             depth=depth,
-            normal=clamp_finite(np.asarray(raster.front_normal, np.float32)),
+            normal=finite(raster.front_normal, dtype=np.float32),
             selected=selected_flags[key],
             candidate=candidate_flags[key],
             element=element_ids[key],
@@ -375,11 +380,6 @@ class FrameRenderer:
         for light in (light for light in snapshot.lights if light.cast_shadows and casters):
             footprint[casters] += scale * ShadowRegionIndex(light, points).counts([element_bounds[i] for i in casters])
         return footprint
-
-
-def clamp_finite(array: np.ndarray) -> np.ndarray:
-    """``array`` itself when every value is finite (one reduction), else a finite copy."""
-    return array if np.isfinite(array).all() else np.nan_to_num(array)
 
 
 def _effect_rays_per_pixel(snapshot, area_px, footprint) -> np.ndarray:
