@@ -264,7 +264,7 @@ class FrameRenderer:
                        "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,
                          "refractions": counters.refraction_rays},
-            element_rays=element_rays), selection)
+            element_rays=element_rays, trace_wanted=may_trace), selection)
         self.previous_selection = {name: bool(flag) for name, flag in zip(frame_elements.names, selected)}
         self.frames_rendered += 1
         stats = {

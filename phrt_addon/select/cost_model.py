@@ -25,34 +25,19 @@ the time the model expects to measure; Q = 2 charges an element twice its
 expected time against the budget.  The learning itself never involves Q in the
 measured mode (rays and milliseconds are physical).
 
-Learning every quantity uses :class:`RobustEstimate`, built for the budget loop:
-
-* cold start: the prior is used until the first measurement, which replaces it;
-  until the window is full the estimate is the running median of what was seen
-  (the first frame's JIT-slow raster time is voted out by the second and third);
-* noise: inside a gate (ratio ``gate_ratio``) an exponential moving average in
-  the log domain, which converges monotonically (no overshoot);
-* outliers: an observation outside the gate is ignored;
-* step changes: consecutive observations outside the gate on the same side mean
-  the quantity really changed, and the estimate jumps to the median of them:
-  ``confirm_up`` (2) above the gate - a cost that rose puts frames over budget,
-  so at most two in a row - and ``confirm`` (3) below it - a cost that fell only
-  leaves time unused.  A 10x step of the cost per ray is therefore followed
-  exactly after 2 (up) or 3 (down) frames, without oscillating (the stiff case
-  of the budget loop, simulated in tests/core/test_cost_model.py and
-  tests/core/test_budget_loop.py).
+Every quantity is learned by ``robust_estimate.RobustEstimate`` (cold start, noise, outliers and
+step changes of the budget loop).
 """
 from __future__ import annotations
 
 import math
-import statistics
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from ..schema import COST_MODES, EFFECTS
+from .robust_estimate import RobustEstimate
 
 STAGES = ("raster", "select", "composite")
 
@@ -72,6 +57,16 @@ PAPER_MS_PER_COST_PRIOR = 20.0
 # a first guess that is too cheap would select an element for one frame and drop it the next
 # (an over-budget frame and two selection flips); one measurement replaces the guess.
 UNMEASURED_MARGIN = 1.5
+# A learned cost that prices every frame out is never measured again (the first traced frames pay
+# first-use work; a hiccup of this machine doubles a frame).  After STALE_FRAMES frames that could
+# have traced and did not, it is divided by STALE_DISCOUNT (not reset to the prior: a cost measured
+# right, too dear for the time left, is then not traced at once at a guessed price, a sure
+# overrun); each revision doubles the idle frames before the next (at most STALE_MAX_FRAMES), so a
+# cost that really is too dear is probed less and less often.  The fixed trace overhead here and
+# BENEFIT's per-effect costs (``item_costs.py``) follow this rule.
+STALE_FRAMES = 8
+STALE_MAX_FRAMES = 128
+STALE_DISCOUNT = 2.0
 # Smallest stage time worth a logarithm (a stage measured at 0 ms is this).
 STAGE_FLOOR_MS = 1e-3
 # Upper clamp of any predicted time: keeps sums finite whatever the input.
@@ -86,80 +81,6 @@ def normalise_cost_mode(cost_mode: str) -> str:
     if mode not in COST_MODES:
         raise ValueError(f"cost_mode must be one of {COST_MODES} (any case), not {cost_mode!r}")
     return mode
-
-
-class RobustEstimate:
-    """A positive quantity (a time, a cost per ray, a ratio) tracked in the log domain.
-
-    See the module docstring for the behaviour; the parameters:
-
-    ``prior``        value before any measurement (must be > 0)
-    ``smoothing``    EMA weight of an observation inside the gate
-    ``gate_ratio``   an observation within [value / gate_ratio, value * gate_ratio] is noise
-    ``confirm``      consecutive observations below the gate that are a real change
-    ``confirm_up``   the same above the gate (default: ``min(2, confirm)``)
-    ``window``       observations kept for the median (cold start and re-anchoring)
-    ``floor``        observations in [0, floor) count as ``floor``; negative, NaN or
-                     infinite observations are ignored
-    """
-
-    def __init__(self, prior: float, *, smoothing: float = 0.3, gate_ratio: float = 1.3,
-                 confirm: int = 3, window: int = 5, floor: float = 0.0, confirm_up: int | None = None):
-        if not (math.isfinite(prior) and prior > 0):
-            raise ValueError(f"prior must be a positive finite number, not {prior!r}")
-        confirm_up = min(2, confirm) if confirm_up is None else confirm_up
-        if not (0.0 < smoothing <= 1.0 and gate_ratio > 1.0 and 1 <= confirm <= window
-                and 1 <= confirm_up <= window):
-            raise ValueError("need 0 < smoothing <= 1, gate_ratio > 1 and 1 <= confirm, confirm_up <= window")
-        self._confirm_up = confirm_up
-        self._log_value = math.log(prior)
-        self._value = float(prior)
-        self._smoothing = smoothing
-        self._log_gate = math.log(gate_ratio)
-        self._confirm = confirm
-        self._recent = deque(maxlen=window)
-        self._floor = floor
-        self._outside_gate = 0
-        self.observations = 0
-
-    @property
-    def value(self) -> float:
-        return self._value
-
-    def update(self, observed: float) -> bool:
-        """Learn from one measurement; returns False when it was unusable (ignored)."""
-        try:
-            observed = float(observed)
-        except (TypeError, ValueError):
-            return False
-        if not math.isfinite(observed) or observed < 0:
-            return False
-        observed = max(observed, self._floor)
-        if observed <= 0:
-            return False
-        log_observed = math.log(observed)
-        self._recent.append(log_observed)
-        self.observations += 1
-        if self.observations <= self._recent.maxlen:
-            # Cold start: the running median of everything seen so far.
-            self._log_value = statistics.median(self._recent)
-            self._value = math.exp(self._log_value)
-            self._outside_gate = 0
-            return True
-        innovation = log_observed - self._log_value
-        if abs(innovation) <= self._log_gate:
-            self._log_value += self._smoothing * innovation
-            self._outside_gate = 0
-        else:
-            side = 1 if innovation > 0 else -1
-            # Consecutive observations outside the gate on one side (a change of side starts over).
-            self._outside_gate = self._outside_gate + side if self._outside_gate * side > 0 else side
-            needed = self._confirm_up if side > 0 else self._confirm
-            if abs(self._outside_gate) >= needed:
-                self._log_value = statistics.median(list(self._recent)[-needed:])
-                self._outside_gate = 0
-        self._value = math.exp(self._log_value)
-        return True
 
 
 @dataclass
@@ -182,6 +103,7 @@ class FrameStats:
     # Of ``trace_ms``, what no effect's timer holds (the fixed cost of tracing anything); None:
     # not measured (the whole trace time is then shared between the effects, as per-ray cost).
     trace_overhead_ms: float | None = None
+    trace_wanted: bool = False  # the frame could have traced (a candidate in view, not RASTER)
 
 
 def _finite_at_least(value, low: float, strict: bool) -> float | None:
@@ -226,6 +148,7 @@ class CostModel:
         self._paper_ms_per_cost = self._estimate(paper_ms_per_cost_prior)
         self._residual = self._estimate(1.0)
         self._trace_overhead = self._estimate(TRACE_OVERHEAD_PRIOR_MS, floor=STAGE_FLOOR_MS)
+        self._overhead_idle, self._overhead_stale_after = 0, STALE_FRAMES  # frames (STALE_FRAMES)
         self._rays_ratio: dict[str, RobustEstimate] = {}
         # The learned ratios as an array in the last frame's element order (the
         # engine keeps the order stable, so lookups by name are rarely needed).
@@ -329,6 +252,7 @@ class CostModel:
             if measured is not None:
                 self._stage_ms[stage].update(measured)
         trace_ms = _finite_positive(stats.trace_ms)
+        self._revise_stale_overhead(trace_ms is not None, bool(stats.trace_wanted))
         overhead = _finite_non_negative(stats.trace_overhead_ms)
         if trace_ms is not None and overhead is not None:
             overhead = min(overhead, trace_ms)
@@ -356,6 +280,19 @@ class CostModel:
         summed_cost = float(np.sum(np.asarray(result.C)[selected]))
         if summed_cost > 0:
             self._paper_ms_per_cost.update(trace_ms / summed_cost)
+
+    def _revise_stale_overhead(self, measured: bool, wanted: bool) -> None:
+        """The fixed trace overhead, not measured for its stale period of frames that could have
+        traced, is divided by STALE_DISCOUNT (see STALE_FRAMES)."""
+        if measured or not wanted:
+            self._overhead_idle = 0 if measured else self._overhead_idle
+            return
+        self._overhead_idle += 1
+        if self._overhead_idle >= self._overhead_stale_after:
+            if self._trace_overhead.observations:
+                self._trace_overhead.revise(STALE_DISCOUNT)
+            self._overhead_stale_after = min(2 * self._overhead_stale_after, STALE_MAX_FRAMES)
+            self._overhead_idle = 0
 
     def _learn_ms_per_ray(self, trace_ms, effect_ms, effect_rays, element_rays, result) -> None:
         total_rays = float(effect_rays.sum())

@@ -45,7 +45,7 @@ import numpy as np
 from ..finite import finite
 from ..schema import EFFECTS
 from .benefit_selection import TIER_COST, TIER_RATES
-from .cost_model import MS_PER_RAY_PRIOR, UNMEASURED_MARGIN
+from .cost_model import MS_PER_RAY_PRIOR, STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES, UNMEASURED_MARGIN
 
 WINDOW = 32
 SPREAD = 1.5  # max/min ray count of the window before the line is fitted
@@ -59,18 +59,11 @@ MIN_PAIRS = 3  # pairs of frames SPREAD apart in rays before the power law is fi
 # 22,000 rays 18 ms (the oracle's timing): about rays ** 0.6 (numpy's and Embree's per-call work
 # weighs on a small item, not on a large one).
 MIN_EXPONENT = 0.6
-# An effect with items that has not been traced for STALE_FRAMES frames revises what it learned:
-# a fixed or per-ray part learned too high (a first measurement that paid first-use work: the
-# showcase's first traced frames took 2-3x the steady ms a ray) would otherwise price it out for
-# the rest of the replay, never to be measured again.  Its window is cleared and its costs are
-# divided by STALE_DISCOUNT (not reset to the prior: a cost measured right, too dear for the time
-# left, is then not traced at once at a guessed price, a sure overrun); each revision doubles the
-# effect's idle frames before the next (STALE_FRAMES x 2 ** k, at most STALE_MAX_FRAMES): an effect
-# that really is too dear is probed less and less often.  Its items' rays ratios are kept (counted
-# rays, not timed).
-STALE_FRAMES = 8
-STALE_MAX_FRAMES = 128
-STALE_DISCOUNT = 2.0
+# An effect with items that has not been traced for its stale period revises what it learned
+# (``cost_model.STALE_FRAMES``): a fixed or per-ray part learned too high (the showcase's first
+# traced frames took 2-3x the steady ms a ray) would otherwise price it out for the rest of the
+# replay.  Its window is cleared and its costs are divided by STALE_DISCOUNT; each revision doubles
+# the effect's idle frames before the next.  Its items' rays ratios are kept (counted rays, not timed).
 # Besides the last WINDOW traced frames, each effect keeps its latest frame in every octave of
 # rays per item (an anchor), so a large item measured once still prices its own range after the
 # window has moved on: atrium path1, the oak's shadows (35,000 rays, about 26 ms traced) were

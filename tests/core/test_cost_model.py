@@ -10,7 +10,8 @@ import pytest
 
 from phrt.phrt_addon.select import heuristic
 from phrt.phrt_addon.select import selection_terms
-from phrt.phrt_addon.select.cost_model import EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats, RobustEstimate, normalise_cost_mode
+from phrt.phrt_addon.select.cost_model import EFFECTS, MS_PER_RAY_PRIOR, PAPER_MS_PER_COST_PRIOR, STAGE_PRIOR_MS, UNMEASURED_MARGIN, CostModel, FrameStats, normalise_cost_mode
+from phrt.phrt_addon.select.robust_estimate import RobustEstimate
 
 TRUE_MS_PER_RAY = np.array([1e-4, 4e-4, 6e-4])  # shadows, reflections, refractions
 RAYS_PER_PIXEL_OF_EFFECT = np.array([2.0, 1.0, 3.0])  # 2 lights, 1 reflection, 3 refraction bounces
@@ -359,3 +360,52 @@ def test_paper_mode_factor_recovers_from_a_10x_step_on_a_fixed_selection():
     assert abs(errors[10]) > 0.5
     assert np.all(np.abs(errors[20:]) < 0.10)
     assert sign_flips(errors, ignore_below=1e-6) <= 2
+
+
+def test_a_fixed_overhead_learned_too_high_is_revised_after_frames_that_could_have_traced():
+    """A fixed trace overhead measured once at 40 ms (a hiccup) and never traced again since (it
+    leaves no time): after STALE_FRAMES frames that wanted to trace it is halved, then after twice
+    as many, and so on; frames that could not trace (nothing in view) do not count; the next
+    measurement is a cold start (it replaces the revised value, not averaged with the old)."""
+    from phrt.phrt_addon.select.cost_model import STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES
+    model = CostModel()
+    model.observe(FrameStats(trace_ms=45.0, trace_overhead_ms=40.0, trace_wanted=True))
+    assert model.trace_overhead_ms() == pytest.approx(40.0)
+    for _ in range(3 * STALE_FRAMES):
+        model.observe(FrameStats(raster_ms=30.0, trace_wanted=False))  # nothing to trace: no revision
+    assert model.trace_overhead_ms() == pytest.approx(40.0)
+    seen = []
+    for _ in range(8 * STALE_MAX_FRAMES):
+        model.observe(FrameStats(raster_ms=30.0, trace_wanted=True))
+        seen.append(model.trace_overhead_ms())
+    before = [40.0] + seen[:-1]
+    drops = [frame + 1 for frame, (now, then) in enumerate(zip(seen, before)) if now < then]
+    assert all(now == pytest.approx(then / STALE_DISCOUNT) for now, then in zip(seen, before) if now < then)
+    gaps, period = list(np.diff([0] + drops)), STALE_FRAMES
+    while period < STALE_MAX_FRAMES:  # STALE_FRAMES, then twice as many each time ...
+        assert gaps.pop(0) == period
+        period *= 2
+    assert gaps and set(gaps) == {STALE_MAX_FRAMES}  # ... up to STALE_MAX_FRAMES
+    model.observe(FrameStats(trace_ms=5.0, trace_overhead_ms=3.0, trace_wanted=True))
+    assert model.trace_overhead_ms() == pytest.approx(3.0)
+
+
+def test_a_traced_frame_resets_the_overhead_idle_count():
+    from phrt.phrt_addon.select.cost_model import STALE_FRAMES
+    model = CostModel()
+    model.observe(FrameStats(trace_ms=12.0, trace_overhead_ms=10.0, trace_wanted=True))
+    for _ in range(5):
+        for _ in range(STALE_FRAMES - 1):
+            model.observe(FrameStats(raster_ms=30.0, trace_wanted=True))
+        model.observe(FrameStats(trace_ms=12.0, trace_overhead_ms=10.0, trace_wanted=True))
+    assert model.trace_overhead_ms() == pytest.approx(10.0)
+
+
+def test_robust_estimate_revise_divides_and_starts_over():
+    estimate = RobustEstimate(1.0)
+    for value in (8.0, 8.0, 8.0, 8.0, 8.0, 8.0):
+        estimate.update(value)
+    estimate.revise(4.0)
+    assert estimate.value == pytest.approx(2.0)
+    estimate.update(100.0)  # a cold start: taken at once (outside the gate it would be ignored)
+    assert estimate.value == pytest.approx(100.0)
