@@ -195,8 +195,7 @@ class FrameRenderer:
                                                 rates=choice.rates if choice is not None else self._forced_rates(n_elements))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
-        # A replay's first traced frame imports the tracer and warms its buffers: one-time work no cost,
-        # overhead or margin learns (atrium path1 at 0.25: a 54 ms overhead, no time to trace after it).
+        # A replay's first traced frame is one-time work (the tracer's imports, first buffers): not learned.
         warm = traced is not None and self.traced_frames > 0
         self.traced_frames += traced is not None
 
@@ -249,7 +248,7 @@ class FrameRenderer:
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
         setup_ms = raster.setup_ms + counters.upload_ms + shade_setup_ms
-        if use_benefit and self.frames_rendered > 0:  # a steady frame (the reports' p95: one-time work out)
+        if use_benefit and self.frames_rendered > 0 and (traced is None or warm):  # a steady frame, for the aim
             self.benefit_selector.observe_frame(max(total_ms - setup_ms, 0.0), selection.budget_ms,
                                                 traced=traced is not None)
         # One-time work (Embree builds, shader compiles, uploads, new shadow maps) is not a per-frame cost.
@@ -264,7 +263,8 @@ class FrameRenderer:
                        "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,
                          "refractions": counters.refraction_rays},
-            element_rays=element_rays, trace_wanted=may_trace), selection)
+            element_rays=element_rays,  # the overhead's revision counts frames that could have traced:
+            trace_wanted=may_trace and self.forced_selection is None and selection.time_left_ms > 0), selection)
         self.previous_selection = {name: bool(flag) for name, flag in zip(frame_elements.names, selected)}
         self.frames_rendered += 1
         stats = {

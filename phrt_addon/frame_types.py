@@ -26,6 +26,8 @@ def rows_of(array: np.ndarray, index) -> np.ndarray:
     if isinstance(index, slice):
         return array[index]
     index = np.asarray(index)
+    if index.size == 0 and index.dtype != bool:
+        index = index.astype(np.intp)  # [] is float64 to numpy
     if index.dtype == bool:
         if index.shape != array.shape[:1]:
             raise IndexError(f"a mask of {index.shape} over {array.shape[0]} rows")

@@ -288,9 +288,8 @@ class CostModel:
             self._overhead_idle = 0 if measured else self._overhead_idle
             return
         self._overhead_idle += 1
-        if self._overhead_idle >= self._overhead_stale_after:
-            if self._trace_overhead.observations:
-                self._trace_overhead.revise(STALE_DISCOUNT)
+        if self._overhead_idle >= self._overhead_stale_after and self._trace_overhead.observations:
+            self._trace_overhead.revise(STALE_DISCOUNT)
             self._overhead_stale_after = min(2 * self._overhead_stale_after, STALE_MAX_FRAMES)
             self._overhead_idle = 0
 

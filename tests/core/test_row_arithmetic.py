@@ -105,6 +105,7 @@ def test_rows_of_is_indexing():
     np.testing.assert_array_equal(rows_of(array, slice(3, 9)), array[3:9])
     broadcast = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (50, 3))  # a sun's directions
     np.testing.assert_array_equal(rows_of(broadcast, mask), broadcast[mask])
+    assert rows_of(array, []).shape == (0, 3) == array[[]].shape
     with pytest.raises(IndexError):
         rows_of(array, mask[:-1])  # np.compress would cut the array silently
     with pytest.raises(IndexError):
