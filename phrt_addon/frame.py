@@ -195,7 +195,7 @@ class FrameRenderer:
                                                 rates=choice.rates if choice is not None else self._forced_rates(n_elements))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
-        # A replay's first traced frame is one-time work (the tracer's imports, first buffers): not learned.
+        # A first trace's one-time work teaches the overhead (a prudent start, revised if it prices tracing out) only.
         warm = traced is not None and self.traced_frames > 0
         self.traced_frames += traced is not None
 
@@ -225,8 +225,8 @@ class FrameRenderer:
                 self.benefit_selector.observe_measure_cost(measure, composite_ms + (_ms(start) if measure else 0.0))
             self.benefit_selector.observe(frame_elements.names, choice, item_priors, measured, pixels)
             self.item_costs.tick(choice.eligible.any(axis=0), choice.chosen.any(axis=0) & (traced is not None))
-            if warm:
-                if self.cost_model.trace_overhead_ms() > 0 and self.item_costs.measured(choice.chosen):
+            if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
+                if warm and self.cost_model.trace_overhead_ms() > 0 and self.item_costs.measured(choice.chosen):
                     self.benefit_selector.observe_time(selection.predicted_trace_ms,
                                                        max(trace_ms - counters.upload_ms, 0.0))
                 self.item_costs.observe(
@@ -255,10 +255,10 @@ class FrameRenderer:
         self.cost_model.observe(FrameStats(
             raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
             composite_ms=None if shade_setup_ms > 0 else composite_ms,
-            trace_ms=max(trace_ms - counters.upload_ms, 0.0) if warm else None,
+            trace_ms=max(trace_ms - counters.upload_ms, 0.0) if traced is not None else None,
             # The layers' read-back, the scene update, the uploads of the results: no effect's.
             trace_overhead_ms=max(trace_ms - counters.upload_ms - counters.shadow_ms - counters.reflection_ms
-                                  - counters.refraction_ms, 0.0) if warm else None,
+                                  - counters.refraction_ms, 0.0) if traced is not None else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},
             effect_rays={"shadows": counters.shadow_rays, "reflections": counters.reflection_rays,

@@ -290,7 +290,8 @@ class CostModel:
         self._overhead_idle += 1
         if self._overhead_idle >= self._overhead_stale_after and self._trace_overhead.observations:
             self._trace_overhead.revise(STALE_DISCOUNT)
-            self._overhead_stale_after = min(2 * self._overhead_stale_after, STALE_MAX_FRAMES)
+            if self._trace_overhead.observations > 1:  # measured once (a first, cold trace): not slowed
+                self._overhead_stale_after = min(2 * self._overhead_stale_after, STALE_MAX_FRAMES)
             self._overhead_idle = 0
 
     def _learn_ms_per_ray(self, trace_ms, effect_ms, effect_rays, element_rays, result) -> None:

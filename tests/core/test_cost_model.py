@@ -369,7 +369,8 @@ def test_a_fixed_overhead_learned_too_high_is_revised_after_frames_that_could_ha
     measurement is a cold start (it replaces the revised value, not averaged with the old)."""
     from phrt.phrt_addon.select.cost_model import STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES
     model = CostModel()
-    model.observe(FrameStats(trace_ms=45.0, trace_overhead_ms=40.0, trace_wanted=True))
+    for _ in range(2):  # measured twice (a value measured once is revised faster: below)
+        model.observe(FrameStats(trace_ms=45.0, trace_overhead_ms=40.0, trace_wanted=True))
     assert model.trace_overhead_ms() == pytest.approx(40.0)
     for _ in range(3 * STALE_FRAMES):
         model.observe(FrameStats(raster_ms=30.0, trace_wanted=False))  # nothing to trace: no revision
@@ -409,3 +410,15 @@ def test_robust_estimate_revise_divides_and_starts_over():
     assert estimate.value == pytest.approx(2.0)
     estimate.update(100.0)  # a cold start: taken at once (outside the gate it would be ignored)
     assert estimate.value == pytest.approx(100.0)
+
+
+def test_an_overhead_measured_once_is_revised_every_stale_period():
+    """A first, cold trace (the tracer's imports) measured once and pricing tracing out: halved every
+    STALE_FRAMES frames, not ever more slowly, so tracing resumes within a few periods."""
+    from phrt.phrt_addon.select.cost_model import STALE_DISCOUNT, STALE_FRAMES
+    model = CostModel()
+    model.observe(FrameStats(trace_ms=60.0, trace_overhead_ms=54.0, trace_wanted=True))
+    for revision in range(1, 5):
+        for _ in range(STALE_FRAMES):
+            model.observe(FrameStats(raster_ms=30.0, trace_wanted=True))
+        assert model.trace_overhead_ms() == pytest.approx(54.0 / STALE_DISCOUNT ** revision)
