@@ -131,15 +131,26 @@ def points_rect(camera, points, width: int, height: int, pad: int = RECT_PAD):
     if not np.all(np.isfinite(ndc)):
         return None
     ndc = np.clip(ndc, -4.0, 4.0)  # beyond the frame either way (ints stay small)
-    x0 = max(int(np.floor((ndc[:, 0].min() + 1.0) * 0.5 * width)) - pad, 0)
-    x1 = min(int(np.ceil((ndc[:, 0].max() + 1.0) * 0.5 * width)) + pad, int(width))
-    y0 = max(int(np.floor((ndc[:, 1].min() + 1.0) * 0.5 * height)) - pad, 0)
-    y1 = min(int(np.ceil((ndc[:, 1].max() + 1.0) * 0.5 * height)) + pad, int(height))
-    if x1 <= x0 or y1 <= y0:
-        return EMPTY  # off screen
-    if (x1 - x0) * (y1 - y0) > RECT_MAX_SHARE * width * height:
-        return None
-    return x0, y0, x1 - x0, y1 - y0
+    return ndc_rects(ndc.min(axis=0)[None], ndc.max(axis=0)[None], width, height, pad)[0]
+
+
+def ndc_rects(low, high, width: int, height: int, pad: int = RECT_PAD) -> list:
+    """Per row of ``low`` / ``high`` ((P, 2) finite NDC corners, within -4..4): the (x, y, w, h)
+    pixels holding them, grown by ``pad``; EMPTY when off screen; None when over RECT_MAX_SHARE
+    of the frame (``points_rect``'s last step, for one set or many)."""
+    x0 = np.maximum(np.floor((low[:, 0] + 1.0) * 0.5 * width).astype(np.int64) - pad, 0)
+    x1 = np.minimum(np.ceil((high[:, 0] + 1.0) * 0.5 * width).astype(np.int64) + pad, int(width))
+    y0 = np.maximum(np.floor((low[:, 1] + 1.0) * 0.5 * height).astype(np.int64) - pad, 0)
+    y1 = np.minimum(np.ceil((high[:, 1] + 1.0) * 0.5 * height).astype(np.int64) + pad, int(height))
+    rects = []
+    for a, b, c, d in zip(x0.tolist(), x1.tolist(), y0.tolist(), y1.tolist()):
+        if b <= a or d <= c:
+            rects.append(EMPTY)  # off screen
+        elif (b - a) * (d - c) > RECT_MAX_SHARE * width * height:
+            rects.append(None)
+        else:
+            rects.append((a, c, b - a, d - c))
+    return rects
 
 
 

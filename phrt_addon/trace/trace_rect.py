@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..raster.gbuffer import EMPTY, RECT_MAX_SHARE, RECT_PAD, points_rect
+from ..raster.gbuffer import EMPTY, RECT_MAX_SHARE, RECT_PAD, ndc_rects, points_rect
 from ..scene import lights, shading
 from ..scene.snapshot import box_corners
 
@@ -176,20 +176,8 @@ def points_rects(camera, point_sets, width: int, height: int, pad: int = RECT_PA
         ndc = front[..., :2] / front[..., 3:4]
     finite = np.isfinite(ndc).all(axis=(1, 2))
     ndc = np.clip(np.where(np.isfinite(ndc), ndc, 0.0), -4.0, 4.0)
-    low, high = ndc.min(axis=1), ndc.max(axis=1)
-    x0 = np.maximum(np.floor((low[:, 0] + 1.0) * 0.5 * width).astype(np.int64) - pad, 0)
-    x1 = np.minimum(np.ceil((high[:, 0] + 1.0) * 0.5 * width).astype(np.int64) + pad, int(width))
-    y0 = np.maximum(np.floor((low[:, 1] + 1.0) * 0.5 * height).astype(np.int64) - pad, 0)
-    y1 = np.minimum(np.ceil((high[:, 1] + 1.0) * 0.5 * height).astype(np.int64) + pad, int(height))
-    for index, ok, a, b, c, d in zip(np.flatnonzero(simple).tolist(), finite.tolist(), x0.tolist(), x1.tolist(),
-                                     y0.tolist(), y1.tolist()):
-        if not ok:
-            rects[index] = None
-        elif b <= a or d <= c:
-            rects[index] = EMPTY
-        elif (b - a) * (d - c) > RECT_MAX_SHARE * width * height:
-            rects[index] = None
-        else:
-            rects[index] = (a, c, b - a, d - c)
+    for index, ok, rect in zip(np.flatnonzero(simple).tolist(), finite.tolist(),
+                               ndc_rects(ndc.min(axis=1), ndc.max(axis=1), width, height, pad)):
+        rects[index] = rect if ok else None
     return rects
 
