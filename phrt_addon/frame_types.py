@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from .gather import compress_rows, take_rows
 from .scene import shading
 from .raster.gbuffer import GBuffer
 from .raster.normals import geometric_normals
@@ -21,8 +22,9 @@ from .raster.normals import geometric_normals
 
 def rows_of(array: np.ndarray, index) -> np.ndarray:
     """``array[index]`` along the first axis: ``np.take`` / ``np.compress`` for an index array
-    (of (n, 3) rows several times faster than numpy's fancy indexing); a mask of another
-    length is an error, as it is for ``array[mask]``."""
+    (of (n, 3) rows several times faster than numpy's fancy indexing; ``gather.take_rows``: not
+    from a strided view, which they copy whole first); a mask of another length is an error, as
+    it is for ``array[mask]``."""
     if isinstance(index, slice):
         return array[index]
     index = np.asarray(index)
@@ -31,8 +33,8 @@ def rows_of(array: np.ndarray, index) -> np.ndarray:
     if index.dtype == bool:
         if index.shape != array.shape[:1]:
             raise IndexError(f"a mask of {index.shape} over {array.shape[0]} rows")
-        return np.compress(index, array, axis=0)
-    return np.take(array, index, axis=0)
+        return compress_rows(index, array)
+    return take_rows(array, index)
 
 
 class RasterFrame(Protocol):
@@ -134,9 +136,9 @@ class LayerPixels:
         values = image.reshape(image.shape[0] * image.shape[1], -1) if image.ndim == 3 else image.reshape(-1)
         rows = None if isinstance(index, slice) and index == slice(None) else self.flat[index]
         if rows is None or 4 * len(rows) > len(self.flat):  # much of the layer: gathered whole, kept
-            self._cache[name] = whole = np.take(values, self.flat, axis=0)
+            self._cache[name] = whole = take_rows(values, self.flat)
             return rows_of(whole, index)
-        return np.take(values, rows, axis=0)  # rows of (n, 3): several times faster than values[rows]
+        return take_rows(values, rows)  # rows of (n, 3): np.take where it is faster than values[rows]
 
     @property
     def position(self) -> np.ndarray:

@@ -307,26 +307,30 @@ class TraceStage:
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:
                     continue
-                points_trace = scene.to_trace(pixels.world(idx))
-                direction, _, _ = shading.light_incidence(light, points_trace, scene.origin)
-                view_dirs = pixels.view_directions(idx)
-                facing = shading.dot(pixels.normals(idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
-                idx, direction, view_dirs, points_trace = idx[facing], rows_of(direction, facing), \
-                    rows_of(view_dirs, facing), rows_of(points_trace, facing)
-                if len(idx) == 0:
-                    continue
                 # A pixel in several casters' regions is traced at the highest of their rates.
                 pixel_rate = np.zeros(len(idx))
                 for caster, caster_region in zip(casters, caster_regions):
                     pixel_rate = np.where(caster_region[idx], np.maximum(pixel_rate, rate_of["shadows"][caster]),
                                           pixel_rate)
+                # Only the pixels cast this frame are prepared (world position, light, facing,
+                # offsets): at a reduced rate that work shrinks with the rays.  The others are
+                # reconstructed; one facing away from the light gets a value it never uses.
                 cast = rated(pixels, idx, pixel_rate)
-                ray_idx = idx[cast]
-                points_trace, normal, eps = ray_start(pixels, ray_idx, rows_of(view_dirs, cast),
-                                                      rows_of(points_trace, cast))
-                _, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                blocked = scene.occluded(points_trace + normal * eps[:, None], rows_of(direction, cast),
-                                         distance - 2 * eps)
+                cast_idx = idx[cast]
+                points_trace = scene.to_trace(pixels.world(cast_idx))
+                direction, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
+                view_dirs = pixels.view_directions(cast_idx)
+                facing = shading.dot(pixels.normals(cast_idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
+                ray_idx, direction, view_dirs, points_trace = cast_idx[facing], rows_of(direction, facing), \
+                    rows_of(view_dirs, facing), rows_of(points_trace, facing)
+                distance = np.compress(facing, distance)
+                keep = ~cast
+                keep[np.flatnonzero(cast)[facing]] = True
+                idx, cast, pixel_rate = idx[keep], cast[keep], pixel_rate[keep]
+                if len(idx) == 0:
+                    continue
+                points_trace, normal, eps = ray_start(pixels, ray_idx, view_dirs, points_trace)
+                blocked = scene.occluded(points_trace + normal * eps[:, None], direction, distance - 2 * eps)
                 traced.shadow_visibility[(layer_name, light_index)] = filled(
                     "shadows", layer_name, pixels, idx, cast, np.where(blocked, 0.0, 1.0).astype(np.float32),
                     pixel_rate)

@@ -100,7 +100,11 @@ def test_a_reduced_rate_casts_its_share_of_the_rays_and_reconstructs_close_to_fu
     shadow = result.traced.shadow_visibility[("opaque", 0)]
     full_shadow = reference.traced.shadow_visibility[("opaque", 0)]
     assert np.isfinite(shadow[1]).all() and ((shadow[1] >= 0) & (shadow[1] <= 1)).all()
-    assert np.abs(shadow[1] - values_at(full_shadow, shadow[0])).mean() < shadow_mad
+    # At a reduced rate only the pixels cast are tested for facing the light: the reconstructed
+    # ones include pixels facing away (the full rate leaves those out; their light is zero).
+    assert np.isin(full_shadow[0], shadow[0]).mean() > 0.99
+    both = np.isin(shadow[0], full_shadow[0])
+    assert np.abs(shadow[1][both] - values_at(full_shadow, shadow[0][both])).mean() < shadow_mad
     # A shadow that is half traced still darkens where the full one does.
     assert (shadow[1] < 0.5).sum() > 0.6 * (full_shadow[1] < 0.5).sum() > 30
 
