@@ -143,3 +143,25 @@ def test_ray_epsilon_takes_the_largest_coordinate():
     want = EPSILON_ULPS * FLOAT32_EPS * (np.maximum(magnitude, view) + 1e-3 * extent) + 1e-7 * extent
     np.testing.assert_array_equal(ray_epsilon(points, extent, view)[np.isfinite(magnitude)],
                                   want[np.isfinite(magnitude)])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_layer_pixels_keep_each_pixels_face_normal_across_calls(seed):
+    """Asked in overlapping parts (lights' regions), with repeats, by index or mask, a layer's
+    face normals are those of one call over every pixel."""
+    from types import SimpleNamespace
+    from phrt.phrt_addon.frame_types import LayerPixels
+    rng = np.random.default_rng(seed)
+    layer = _layer(rng, height=14, width=17)
+    camera = SimpleNamespace(ortho=False, forward=np.array([0.0, 0.0, -1.0]))
+    materials = SimpleNamespace(ior=np.ones(2))
+    pixels = LayerPixels(layer, np.zeros(3), camera, materials)
+    everything = np.arange(len(pixels))
+    view = np.nan_to_num(pixels.view_directions(everything), nan=0.0) + np.array([0.0, 0.0, -1e-3])
+    want = geometric_normals(layer, pixels.flat, view)
+    for _ in range(4):
+        part = rng.choice(everything, size=len(pixels) // 3)  # repeats within a call
+        np.testing.assert_array_equal(pixels.geometric_normals(part, view[part]), want[part])
+    mask = rng.random(len(pixels)) < 0.5
+    np.testing.assert_array_equal(pixels.geometric_normals(mask, view[mask]), want[mask])
+    np.testing.assert_array_equal(pixels.geometric_normals(slice(None), view), want)
