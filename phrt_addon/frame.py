@@ -32,8 +32,7 @@ from dataclasses import replace as dataclass_replace
 
 import numpy as np
 
-from .select import benefit, benefit_selection, heuristic, item_benefit, item_costs
-from .select import selection_terms
+from .select import benefit, benefit_selection, heuristic, item_benefit, item_costs, selection_terms
 from .scene import shading
 from .select.cost_model import CostModel, FrameStats
 from .frame_types import FramePasses, FrameResult, LayerPixels, RasterFrame
@@ -41,7 +40,8 @@ from .raster.gbuffer import PixelGrid, element_pixel_stats, front_points
 from .finite import finite
 from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
-from .trace.shadow_region import ElementBounds, ShadowRegionIndex
+from .trace.element_bounds import ElementBounds
+from .trace.shadow_region import ShadowRegionIndex
 from .trace.stage import TraceResult, TraceStage, traced_effects
 from .trace.trace_rect import ShadowHulls, trace_rect
 

@@ -297,12 +297,8 @@ class TraceStage:
                     chunks = layer_tiles(pixels)
                 # World positions only of the points in tiles a caster may reach (pixels.world(idx)).
                 index = TiledShadowRegions(light, pixels.world, chunks)
-                region = np.zeros(len(pixels), bool)
-                caster_regions = []
-                for caster in casters:
-                    caster_region = index.region(element_bounds[caster])
-                    caster_regions.append(caster_region)
-                    region |= caster_region
+                caster_regions = index.regions([element_bounds[caster] for caster in casters])
+                region = np.logical_or.reduce(caster_regions)
                 counters.shadow_setup_ms += _ms(setup_start)
                 idx = np.flatnonzero(region)
                 if len(idx) == 0:

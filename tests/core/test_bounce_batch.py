@@ -6,7 +6,7 @@ import numpy as np
 
 from phrt.phrt_addon.frame_types import LayerPixels
 from phrt.phrt_addon.scene import shading
-from phrt.phrt_addon.trace.shadow_region import ElementBounds
+from phrt.phrt_addon.trace.element_bounds import ElementBounds
 from phrt.phrt_addon.trace.embree_scene import TraceScene
 from phrt.phrt_addon.trace.stage import TraceStage
 

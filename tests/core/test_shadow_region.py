@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.trace.shadow_region import (ElementBounds, PointChunks, ShadowRegionIndex, TiledShadowRegions,
+from phrt.phrt_addon.trace.element_bounds import ElementBounds
+from phrt.phrt_addon.trace.shadow_region import (PointChunks, ShadowRegionIndex, TiledShadowRegions,
                                                shadow_region)
 from phrt.phrt_addon.scene.snapshot import Light
 
@@ -148,3 +149,56 @@ def test_element_bounds_follow_a_moved_mesh_and_match_its_world_vertices():
     np.testing.assert_allclose(shifted[2][1], first[2][1] + moved[:3, 3], rtol=0, atol=1e-9)
     with pytest.raises(ValueError):  # the kept boxes are shared between frames: read-only
         shifted[0][0][0] = 0.0
+
+
+def _reference_region(light, bounds, points):
+    """The rule of ``shadow_region`` written with (n, 3) products, as it was first written."""
+    low, high = bounds
+    centre, radius = (low + high) / 2.0, 0.5 * float(np.linalg.norm(high - low)) + 1e-6
+    if light.kind == "SUN":
+        direction = np.asarray(light.direction, float) / np.linalg.norm(light.direction)
+        relative = points - centre
+        along = relative @ direction
+        lateral = relative - along[:, None] * direction
+        return (along > -radius) & (np.einsum("ij,ij->i", lateral, lateral) <= radius * radius)
+    to_centre = centre - np.asarray(light.position, float)
+    distance = float(np.linalg.norm(to_centre))
+    if distance <= radius:
+        return np.ones(len(points), bool)
+    to_point = points - np.asarray(light.position, float)
+    point_distance = np.linalg.norm(to_point, axis=1)
+    cos_point = (to_point @ (to_centre / distance)) / np.maximum(point_distance, 1e-30)
+    return (cos_point >= np.sqrt(max(1.0 - (radius / distance) ** 2, 0.0))) & (point_distance > distance - radius)
+
+
+@pytest.mark.parametrize("kind", sorted(LIGHTS))
+def test_the_column_arithmetic_gives_the_rule_and_all_casters_at_once_give_each_region(kind):
+    """``shadow_region`` (by columns) against the rule with (n, 3) products (rounding may move
+    a point on the boundary, no more); ``regions`` of many casters, one with the light inside
+    its bounds, against ``region`` of each."""
+    rng = np.random.default_rng(5)
+    points, tiles = pixel_like_points()
+    light = LIGHTS[kind]
+    bounds_list = []
+    for _ in range(12):
+        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.5])
+        half = rng.uniform(0.05, 2.0, size=3)
+        bounds_list.append((centre - half, centre + half))
+    if light.kind != "SUN":
+        bounds_list.insert(3, (np.asarray(light.position) - 0.5, np.asarray(light.position) + 0.5))
+    hits = 0
+    for bounds in bounds_list:
+        got = shadow_region(light, bounds, points)
+        assert np.count_nonzero(got != _reference_region(light, bounds, points)) <= 2
+        hits += got.sum()
+    assert hits > 1000
+    index = TiledShadowRegions(light, points, PointChunks(points, keys=tiles))
+    together = index.regions(bounds_list)
+    assert index.queries == len(bounds_list)
+    for bounds, region in zip(bounds_list, together):
+        np.testing.assert_array_equal(region, shadow_region(light, bounds, points))
+        np.testing.assert_array_equal(region, TiledShadowRegions(light, points, PointChunks(points, keys=tiles))
+                                      .region(bounds))
+    if light.kind != "SUN":
+        assert together[3].all()
+    assert index.regions([]) == []

@@ -12,7 +12,7 @@ from phrt.phrt_addon.frame_types import LayerPixels
 from phrt.phrt_addon.raster.reference_raster import ReferenceRaster
 from phrt.phrt_addon.scene import shading
 from phrt.phrt_addon.scene.snapshot import Element, Light, Material
-from phrt.phrt_addon.trace.shadow_region import ElementBounds
+from phrt.phrt_addon.trace.element_bounds import ElementBounds
 from phrt.phrt_addon.trace.stage import TraceStage
 
 from test_frame import mirror_scene, ray_cast_gbuffer

@@ -6,7 +6,8 @@ import pytest
 
 from phrt.phrt_addon.frame import FrameRenderer
 from phrt.phrt_addon.scene.snapshot import Light
-from phrt.phrt_addon.trace.shadow_region import ElementBounds, shadow_region
+from phrt.phrt_addon.trace.element_bounds import ElementBounds
+from phrt.phrt_addon.trace.shadow_region import shadow_region
 from phrt.phrt_addon.raster.gbuffer import EMPTY, points_rect
 from phrt.phrt_addon.trace.trace_rect import shadow_hull, union_rect
 
