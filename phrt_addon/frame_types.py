@@ -197,10 +197,11 @@ class LayerPixels:
         """Face normals facing the camera (where secondary rays leave from: rules of tracer.py).
         Each pixel's is computed once a frame and kept: a pixel in several lights' shadow
         regions, or also reflecting, is not computed again (an arcade frame of five shadow lights
-        and reflections, 86k rays: the trace stage 98.9 -> 93.2 ms)."""
+        and reflections, 86k rays: the trace stage 98.9 -> 93.2 ms).  ``view_directions``: the
+        camera's (``view_directions(index)``), the same for a pixel on every call of the frame."""
         index = np.arange(len(self.flat))[index] if isinstance(index, slice) else np.asarray(index)
-        if index.dtype == bool:
-            index = np.flatnonzero(index)
+        index = np.flatnonzero(index) if index.dtype == bool else index.astype(np.intp, copy=False)
+        view_directions = np.broadcast_to(np.asarray(view_directions, np.float64).reshape(-1, 3), (len(index), 3))
         kept = self._cache.get("geometric_normals")
         if kept is None:
             kept = self._cache["geometric_normals"] = (np.zeros((len(self.flat), 3)), np.zeros(len(self.flat), bool))
@@ -209,7 +210,7 @@ class LayerPixels:
         if todo.any():
             new, first = np.unique(index[todo], return_index=True)  # a pixel asked twice: computed once
             first = np.flatnonzero(todo)[first]
-            values[new] = geometric_normals(self.layer, self.flat[new], rows_of(np.asarray(view_directions), first))
+            values[new] = geometric_normals(self.layer, self.flat[new], rows_of(view_directions, first))
             done[new] = True
         return take_rows(values, index)
 

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .reconstruction_guide import NO_ID, PAD, Guide, layer_guide  # noqa: F401 (Guide: the filter's input)
+
 RATES = (0.25, 0.5, 1.0)
 # Positions (row, col) of the traced pixel inside each 2x2 block at quarter rate, frame by frame.
 QUARTER_ORDER = ((0, 0), (1, 1), (0, 1), (1, 0))
@@ -73,99 +75,6 @@ def traced_pixel_mask(rows: int, cols: int, rate, frame: int) -> np.ndarray:
 def rate_radius(rate) -> np.ndarray:
     """Neighbourhood radius per rate: 1 (3x3) at half or full rate, 2 (5x5) at quarter."""
     return np.where(np.asarray(rate, np.float64) < 0.5 - 1e-9, 2, 1)
-
-
-NO_ID = np.iinfo(np.int64).min
-
-
-PAD = 2  # the padding of a guide's images: every 5x5 offset of an image pixel is an index
-
-
-class Guide:
-    """Per-pixel guide of an (h, w) image: ``depth`` (inf where nothing), ``normal`` (3), and
-    ``element`` (int id: pixels of different ids never mix).  ``Guide.of`` takes flat (h * w)
-    arrays; ``layer_guide`` reads a G-buffer layer.  The filter reads ``padded``: the guide as
-    flat float32 / int64 images padded by ``PAD`` pixels (no depth, no id, no normal there),
-    computed once and shared by every reconstruction of the frame's layer (the lights' shadows
-    and the reflections)."""
-
-    def __init__(self, depth, normal, element):
-        self.depth = np.asarray(depth, np.float64).ravel()
-        self.normal = np.asarray(normal, np.float64).reshape(-1, 3)
-        self.element = np.asarray(element).ravel().astype(np.int64)
-        self._padded = {}
-
-    @classmethod
-    def of(cls, depth, normal, element) -> "Guide":
-        return cls(depth, normal, element)
-
-    @property
-    def size(self) -> int:
-        return len(self.depth)
-
-    def _images(self, width: int, rows: slice, cols: slice):
-        """(depth, [x, y, z] unit normal, id) images of the window ``rows`` x ``cols``."""
-        height = self.size // width
-
-        def window(flat_image):
-            return flat_image.reshape(height, width)[rows, cols]
-
-        x, y, z = (np.asarray(window(self.normal[:, axis]), np.float32) for axis in range(3))
-        with np.errstate(invalid="ignore", over="ignore"):
-            length = np.sqrt(x * x + y * y + z * z)
-        usable = np.isfinite(length) & (length > 1e-12)
-        safe = np.where(usable, length, np.float32(1.0))
-        return window(self.depth), [np.where(usable, c / safe, np.float32(0.0)) for c in (x, y, z)], window(self.element)
-
-    def padded(self, width: int, rows: slice, cols: slice):
-        """(depth, [x, y, z] of the unit normal, id) of the window ``rows`` x ``cols`` as flat
-        images padded by ``PAD`` on every side: float32 depth (inf where nothing or not finite,
-        and in the padding), float32 normal (0 where unusable), int64 id (NO_ID in the padding).
-        Kept for the frame: the lights' shadows of one layer often share their window."""
-        key = (width, rows.start, rows.stop, cols.start, cols.stop)
-        if key not in self._padded:
-            depth, normal, ids = self._images(width, rows, cols)
-            with np.errstate(invalid="ignore", over="ignore"):
-                depth = np.where(np.isfinite(depth), depth, np.inf).astype(np.float32)
-            pad = [(PAD, PAD), (PAD, PAD)]
-            self._padded[key] = (np.pad(depth, pad, constant_values=np.inf).ravel(),
-                                 [np.pad(np.asarray(c, np.float32), pad).ravel() for c in normal],
-                                 np.pad(np.asarray(ids, np.int64), pad, constant_values=NO_ID).ravel())
-        return self._padded[key]
-
-
-class _LayerGuide(Guide):
-    """The guide of a G-buffer layer (see ``layer_guide``)."""
-
-    def __init__(self, layer):
-        self.layer = layer
-        self._padded = {}
-
-    @property
-    def size(self) -> int:
-        return self.layer.covered.size
-
-    def _images(self, width: int, rows: slice, cols: slice):
-        # The G-buffer's shading normals are unit (or zero where nothing was drawn): not normalised again.
-        layer = self.layer
-        covered = np.asarray(layer.covered[rows, cols], bool)
-        position = layer.position[rows, cols]
-        x, y, z = (np.asarray(position[..., axis], np.float32) for axis in range(3))
-        with np.errstate(invalid="ignore", over="ignore"):
-            depth = np.where(covered, np.sqrt(x * x + y * y + z * z), np.inf)
-        element = np.asarray(layer.element[rows, cols]).astype(np.int64)
-        material = np.asarray(layer.material[rows, cols]).astype(np.int64)
-        ids = np.where(covered, np.where(element >= 0, element, -2 - np.maximum(material, -1)), NO_ID)
-        normal = layer.normal[rows, cols]
-        return depth, [normal[..., axis] for axis in range(3)], ids
-
-
-def layer_guide(layer) -> Guide:
-    """The guide of a G-buffer layer (``raster.gbuffer.GBufferLayer``, (h, w) images): camera
-    distance of its positions, its shading normals, and an id that is the element index where
-    there is one and ``-2 - material`` elsewhere (surfaces of no element are told apart by
-    material); NO_ID where nothing was drawn."""
-    return _LayerGuide(layer)
 
 
 def _smaller_step(depth, here, pixel, step):
@@ -273,16 +182,19 @@ def _weighted(pos, e_p, reach, offsets, guide_images, wide, traced_id, values):
     s_r, s_c = _smaller_step(depth, d_p, pos, wide), _smaller_step(depth, d_p, pos, 1)
     scale = np.where(np.isfinite(d_p) & (d_p > 0), d_p, np.float32(np.inf))
     far_ok = reach == 2
-    mixed = bool(np.any(~far_ok)) and bool(np.any(far_ok))
+    any_far, all_far = bool(far_ok.any()), bool(far_ok.all())  # of these pixels, not the class's
     spatial = (-0.5 / np.where(far_ok, SPATIAL_SIGMA[2], SPATIAL_SIGMA[1]) ** 2).astype(np.float32)
     inverse_sigma = np.float32(1.0 / DEPTH_SIGMA)
     weight, found = np.zeros(len(pos)), np.zeros(len(pos), bool)
     total = [np.zeros(len(pos)) for _ in range(channels)]
     best = [np.zeros(len(pos)) for _ in range(channels)]
     for dr, dc in offsets:
+        far = max(abs(dr), abs(dc)) == 2
+        if far and not any_far:
+            continue
         q = pos + (dr * wide + dc)
         ok = np.take(traced_id, q) == e_p
-        if mixed and max(abs(dr), abs(dc)) == 2:
+        if far and not all_far:
             ok &= far_ok
         if not ok.any():
             continue

@@ -105,3 +105,60 @@ def test_rows_are_taken_alike_from_contiguous_and_strided_arrays():
         np.testing.assert_array_equal(take_rows(array, index), array[index])
         np.testing.assert_array_equal(compress_rows(mask, array), array[mask])
         assert take_rows(array, index[:0]).shape == (0,) + array.shape[1:]
+
+
+def test_a_half_rate_pixel_never_reads_two_pixels_away_when_quarter_rate_ones_are_settled():
+    """Rates per pixel in one call: quarter-rate pixels the binary shortcut settles must not
+    leave a half-rate pixel of the same parity class reading pixels 2 away."""
+    from phrt.phrt_addon.trace.rates import Guide
+    size = 10
+    guide = Guide.of(np.full(size * size, 5.0), np.tile([0.0, 0.0, 1.0], (size * size, 1)), np.zeros(size * size, int))
+    at = {(3, 3): 0.25, (3, 4): 0.25, (5, 5): 0.5, (5, 7): 0.5}
+    wanted = np.array(sorted(r * size + c for r, c in at))
+    rate = np.array([at[divmod(int(p), size)] for p in wanted])
+    traced = np.array([3 * size + 4, 5 * size + 7])
+    for values in (np.array([1.0, 1.0]), np.array([0.5, 0.7])):
+        out = reconstruct(wanted, traced, values, guide, size, rate)
+        assert 5 * size + 5 in out.unfilled  # its only traced pixel of the element is 2 away
+        assert 3 * size + 3 in out.flat  # a quarter-rate pixel reaches (3, 4)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_rates_per_pixel_keep_each_value_independent_of_the_other_wanted_pixels(seed):
+    """A rate per pixel (the box at quarter rate, the rest at half): the box's pixels alone and
+    the whole layer reconstruct the box's pixels alike, binary and RGB."""
+    layer = scene_layer(seed)
+    wanted = np.flatnonzero(layer.covered.ravel())
+    box_of = layer.element.ravel() == 0
+    rate_of = np.where(box_of, 0.25, 0.5)
+    colour = np.random.default_rng(seed).random((H * W, 3))
+    for values in (colour, shadow_of(layer, seed)):
+        results = []
+        for part in (wanted, wanted[box_of[wanted] | (np.arange(len(wanted)) % 3 == 0)]):
+            cast = traced_subset(part, rate_of[part], H, W, seed)
+            results.append(reconstruct(part, part[cast], values[part[cast]], layer_guide(layer), W, rate_of[part]))
+        whole, part = results
+        mine = box_of[part.flat]
+        at = np.searchsorted(whole.flat, part.flat[mine])
+        np.testing.assert_array_equal(whole.flat[at], part.flat[mine])
+        np.testing.assert_allclose(whole.values[at], part.values[mine], rtol=0, atol=1e-12)
+
+
+def test_a_non_finite_normal_weighs_like_no_normal():
+    """A NaN normal (normalize() of a zero vector on the GPU) at some pixels: the others
+    reconstruct as with a zero normal there (no NaN weight spoiling a neighbourhood)."""
+    layer = scene_layer(1)
+    rng = np.random.default_rng(3)
+    broken = rng.random((H, W)) < 0.03
+    nan_layer, zero_layer = scene_layer(1), scene_layer(1)
+    nan_layer.normal[broken] = np.nan
+    zero_layer.normal[broken] = 0.0
+    wanted = np.flatnonzero(layer.covered.ravel())
+    colour = rng.random((H * W, 3))
+    for rate in (0.25, 0.5):
+        cast = traced_subset(wanted, rate, H, W, 2)
+        traced = wanted[cast]
+        with_nan = reconstruct(wanted, traced, colour[traced], layer_guide(nan_layer), W, rate)
+        with_zero = reconstruct(wanted, traced, colour[traced], layer_guide(zero_layer), W, rate)
+        np.testing.assert_array_equal(with_nan.flat, with_zero.flat)
+        np.testing.assert_array_equal(with_nan.values, with_zero.values)
