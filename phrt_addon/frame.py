@@ -195,7 +195,7 @@ class FrameRenderer:
                                                 rates=choice.rates if choice is not None else self._forced_rates(n_elements))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         trace_ms = _ms(start)
-        # A first trace's one-time work teaches the overhead (a prudent start, revised if it prices tracing out) only.
+        # A replay's first trace (tracer imports, first buffers) teaches the overhead alone (revised if it prices tracing out).
         warm = traced is not None and self.traced_frames > 0
         self.traced_frames += traced is not None
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .reconstruction_guide import NO_ID, PAD, Guide, layer_guide  # noqa: F401 (Guide: the filter's input)
+from .reconstruction_guide import NO_ID, PAD, Guide
 
 RATES = (0.25, 0.5, 1.0)
 # Positions (row, col) of the traced pixel inside each 2x2 block at quarter rate, frame by frame.

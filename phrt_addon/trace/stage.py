@@ -30,7 +30,8 @@ import numpy as np
 
 from ..scene import rules, shading
 from ..frame_types import TracedTerms, rows_of
-from .rates import element_rates, layer_guide, reconstruct, traced_subset
+from .rates import element_rates, reconstruct, traced_subset
+from .reconstruction_guide import layer_guide
 from .pixel_tiles import ImageTiles
 from .shadow_region import PointChunks, TiledShadowRegions
 

@@ -8,7 +8,8 @@ quarter rate is reconstructed to within a small error (bounds below)."""
 import numpy as np
 import pytest
 
-from phrt.phrt_addon.trace.rates import RATES, Guide, reconstruct, traced_pixel_mask
+from phrt.phrt_addon.trace.rates import RATES, reconstruct, traced_pixel_mask
+from phrt.phrt_addon.trace.reconstruction_guide import Guide
 
 H, W = 24, 32
 

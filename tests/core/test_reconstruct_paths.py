@@ -11,7 +11,8 @@ import pytest
 
 from phrt.phrt_addon.gather import compress_rows, take_rows
 from phrt.phrt_addon.raster.gbuffer import GBufferLayer
-from phrt.phrt_addon.trace.rates import layer_guide, reconstruct, traced_subset
+from phrt.phrt_addon.trace.rates import reconstruct, traced_subset
+from phrt.phrt_addon.trace.reconstruction_guide import Guide, layer_guide
 
 H, W = 40, 56
 
@@ -110,7 +111,6 @@ def test_rows_are_taken_alike_from_contiguous_and_strided_arrays():
 def test_a_half_rate_pixel_never_reads_two_pixels_away_when_quarter_rate_ones_are_settled():
     """Rates per pixel in one call: quarter-rate pixels the binary shortcut settles must not
     leave a half-rate pixel of the same parity class reading pixels 2 away."""
-    from phrt.phrt_addon.trace.rates import Guide
     size = 10
     guide = Guide.of(np.full(size * size, 5.0), np.tile([0.0, 0.0, 1.0], (size * size, 1)), np.zeros(size * size, int))
     at = {(3, 3): 0.25, (3, 4): 0.25, (5, 5): 0.5, (5, 7): 0.5}

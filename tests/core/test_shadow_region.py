@@ -14,6 +14,17 @@ LIGHTS = {
 }
 
 
+def random_casters(rng, count, largest_half, lift):
+    """``count`` caster bounds: centres spread over the scene (z squeezed, lifted by ``lift``),
+    half sizes from 0.05 to ``largest_half``."""
+    bounds = []
+    for _ in range(count):
+        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, lift])
+        half = rng.uniform(0.05, largest_half, size=3)
+        bounds.append((centre - half, centre + half))
+    return bounds
+
+
 @pytest.mark.parametrize("kind", sorted(LIGHTS))
 def test_index_matches_brute_force_for_many_casters(kind):
     rng = np.random.default_rng(7)
@@ -100,11 +111,7 @@ def test_counts_of_all_casters_at_once_match_each_region(kind):
     rng = np.random.default_rng(11)
     points = rng.uniform(-10, 10, size=(3000, 3)) * np.array([1.0, 1.0, 0.2])
     light = LIGHTS[kind]
-    bounds = []
-    for _ in range(25):
-        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.0])
-        half = rng.uniform(0.05, 1.5, size=3)
-        bounds.append((centre - half, centre + half))
+    bounds = random_casters(rng, 25, 1.5, 1.0)
     if kind != "sun":  # a caster around the light: every point
         bounds.append((np.array(light.position) - 1.0, np.array(light.position) + 1.0))
     one_by_one = np.array([np.count_nonzero(ShadowRegionIndex(light, points)._test(
@@ -179,11 +186,7 @@ def test_the_column_arithmetic_gives_the_rule_and_all_casters_at_once_give_each_
     rng = np.random.default_rng(5)
     points, tiles = pixel_like_points()
     light = LIGHTS[kind]
-    bounds_list = []
-    for _ in range(12):
-        centre = rng.uniform(-6, 6, size=3) * np.array([1.0, 1.0, 0.3]) + np.array([0, 0, 1.5])
-        half = rng.uniform(0.05, 2.0, size=3)
-        bounds_list.append((centre - half, centre + half))
+    bounds_list = random_casters(rng, 12, 2.0, 1.5)
     if light.kind != "SUN":
         bounds_list.insert(3, (np.asarray(light.position) - 0.5, np.asarray(light.position) + 0.5))
     hits = 0
