@@ -42,7 +42,9 @@ from .problems import ProblemLog
 from .scene.snapshot import SceneSnapshot
 from .trace.element_bounds import ElementBounds
 from .trace.shadow_region import ShadowRegionIndex
-from .trace.stage import TraceResult, TraceStage, traced_effects
+from .trace.stage import TraceStage
+from .select.item_rays import effect_rays_per_pixel, expected_rays, flags_array
+from .trace.trace_result import TraceResult, traced_effects
 from .trace.trace_rect import ShadowHulls, trace_rect
 
 
@@ -138,7 +140,7 @@ class FrameRenderer:
             if shadow_lights and may_trace else np.zeros(n_elements)
         flags = {effect: np.array([getattr(e, effect) for e in snapshot.elements], bool)
                  for effect in ("shadows", "reflections", "refractions")}
-        effect_rays = _effect_rays_per_pixel(snapshot, area_px, footprint)
+        effect_rays = effect_rays_per_pixel(snapshot, area_px, footprint)
         expected_benefit = self.benefit_model.benefit(
             [e.name for e in snapshot.elements],
             benefit.prior_per_pixel(layers, n_elements, flags["reflections"], flags["refractions"],
@@ -150,7 +152,7 @@ class FrameRenderer:
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
             shadows=flags["shadows"], reflections=flags["reflections"], refractions=flags["refractions"],
-            rays_per_pixel=np.sum(effect_rays * _flags_array(flags), axis=1),
+            rays_per_pixel=np.sum(effect_rays * flags_array(flags), axis=1),
             frame_px=raster.width * raster.height,
             near_clip=snapshot.camera.clip_start,
             benefit=expected_benefit,
@@ -182,6 +184,9 @@ class FrameRenderer:
 
         # -- ray tracing ------------------------------------------------------
         start = _timer()
+        # The replay's first frame builds what any later frame would stall on at its first trace
+        # (the Embree scenes, every mesh's bounds): one-time work, in that frame's set-up.
+        prepare_ms = self._prepare_tracing(snapshot, materials) if may_trace and self.frames_rendered == 0 else 0.0
         traced_frame = TraceResult(traced=None, element_rays=np.zeros(n_elements))
         if np.any(selected) and may_trace:
             if layers is None:  # only a frame that traces reads the layers back (a trace cost)
@@ -194,6 +199,7 @@ class FrameRenderer:
                                                 effects=selection.effects,
                                                 rates=choice.rates if choice is not None else self._forced_rates(n_elements))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
+        upload_ms = counters.upload_ms + prepare_ms  # Embree builds: one-time work
         trace_ms = _ms(start)
         # A replay's first trace (tracer imports, first buffers) teaches the overhead alone (revised if it prices tracing out).
         warm = traced is not None and self.traced_frames > 0
@@ -228,9 +234,9 @@ class FrameRenderer:
             if traced is not None and self.frames_rendered > 0:  # the first frame compiles and builds
                 if warm and self.cost_model.trace_overhead_ms() > 0 and self.item_costs.measured(choice.chosen):
                     self.benefit_selector.observe_time(selection.predicted_trace_ms,
-                                                       max(trace_ms - counters.upload_ms, 0.0))
+                                                       max(trace_ms - upload_ms, 0.0))
                 self.item_costs.observe(
-                    frame_elements.names, _expected_rays(area_px, effect_rays), traced_frame.item_rays,
+                    frame_elements.names, expected_rays(area_px, effect_rays), traced_frame.item_rays,
                     choice.chosen, choice.rate, [counters.shadow_ms, counters.reflection_ms, counters.refraction_ms],
                     [counters.shadow_rays, counters.reflection_rays, counters.refraction_rays],
                     shadow_setup_ms=counters.shadow_setup_ms,
@@ -247,7 +253,7 @@ class FrameRenderer:
             select_ms += _ms(start)
 
         total_ms = raster_ms + select_ms + trace_ms + composite_ms
-        setup_ms = raster.setup_ms + counters.upload_ms + shade_setup_ms
+        setup_ms = raster.setup_ms + upload_ms + shade_setup_ms
         if use_benefit and self.frames_rendered > 0 and (traced is None or warm):  # a steady frame, for the aim
             self.benefit_selector.observe_frame(max(total_ms - setup_ms, 0.0), selection.budget_ms,
                                                 traced=traced is not None)
@@ -255,9 +261,9 @@ class FrameRenderer:
         self.cost_model.observe(FrameStats(
             raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
             composite_ms=None if shade_setup_ms > 0 else composite_ms,
-            trace_ms=max(trace_ms - counters.upload_ms, 0.0) if traced is not None else None,
+            trace_ms=max(trace_ms - upload_ms, 0.0) if traced is not None else None,
             # The layers' read-back, the scene update, the uploads of the results: no effect's.
-            trace_overhead_ms=max(trace_ms - counters.upload_ms - counters.shadow_ms - counters.reflection_ms
+            trace_overhead_ms=max(trace_ms - upload_ms - counters.shadow_ms - counters.reflection_ms
                                   - counters.refraction_ms, 0.0) if traced is not None else None,
             effect_ms={"shadows": counters.shadow_ms, "reflections": counters.reflection_ms,
                        "refractions": counters.refraction_ms},
@@ -275,7 +281,7 @@ class FrameRenderer:
             "n_visible": int(np.sum(np.asarray(selection.terms.visible, bool))),
             "n_selected": int(np.sum(selected)), "rays": counters.rays,
             "shadow_rays": counters.shadow_rays, "reflection_rays": counters.reflection_rays,
-            "refraction_rays": counters.refraction_rays, "upload_ms": counters.upload_ms,
+            "refraction_rays": counters.refraction_rays, "upload_ms": upload_ms,
             "setup_ms": setup_ms, "readback_ms": readback_ms,
             "gbuffer_ms": float(raster.stats.get("gbuffer_ms", raster.raster_ms)),
             "time_left_ms": float(selection.time_left_ms), "triangles": snapshot.n_triangles,
@@ -298,6 +304,16 @@ class FrameRenderer:
             return None
         return np.r_[wanted["reflections"] | wanted["refractions"], False]
 
+    def _prepare_tracing(self, snapshot, materials) -> float:
+        """Build the Embree scenes and warm the meshes' bounds the shadows' read-back rectangle
+        needs (``trace_rect``); returns the ms spent (one-time work: both are kept for later
+        frames, per mesh)."""
+        start = _timer()
+        if any(light.cast_shadows for light in snapshot.lights):
+            self.element_bounds.scene_bounds(snapshot)
+        self.trace_stage.prepare(snapshot, materials.casts_shadow[:len(snapshot.materials)])
+        return _ms(start)
+
     def _no_time_to_trace(self, settings, raster_ms) -> bool:
         """A budget in ms whose time left after this frame's raster half cannot pay the trace
         stage's measured fixed overhead: the BENEFIT priors (a read-back) would buy nothing."""
@@ -310,12 +326,12 @@ class FrameRenderer:
         result keeps the paper's terms for the log; its elements' effect flags and rays per pixel
         are those traced, which the cost model learns from."""
         terms = selection.terms
-        flags = _flags_array({"shadows": frame_elements.shadows, "reflections": frame_elements.reflections,
+        flags = flags_array({"shadows": frame_elements.shadows, "reflections": frame_elements.reflections,
                               "refractions": frame_elements.refractions}).astype(bool)
         competing = terms.candidate & terms.visible & terms.within_area
         eligible = flags & competing[:, None] & (pixels > 0)
         overhead = self.cost_model.trace_overhead_ms()
-        cost_ms = self.item_costs.predict(frame_elements.names, _expected_rays(frame_elements.area_px, effect_rays),
+        cost_ms = self.item_costs.predict(frame_elements.names, expected_rays(frame_elements.area_px, effect_rays),
                                           frame_elements.rt_cost)
         time_left = self.benefit_selector.aimed_time_left(selection.time_left_ms, selection.budget_ms)
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
@@ -324,7 +340,7 @@ class FrameRenderer:
                                               unmeasured=self.item_costs.unmeasured(),
                                               visible=terms.visible,
                                               tier_costs=self.item_costs.tier_costs(
-                                                  frame_elements.names, _expected_rays(frame_elements.area_px, effect_rays),
+                                                  frame_elements.names, expected_rays(frame_elements.area_px, effect_rays),
                                                   pixels, frame_elements.rt_cost) if tiers else None)
         chosen = choice.chosen
         selected = chosen.any(axis=1)
@@ -380,21 +396,3 @@ class FrameRenderer:
         for light in (light for light in snapshot.lights if light.cast_shadows and casters):
             footprint[casters] += scale * ShadowRegionIndex(light, points).counts([element_bounds[i] for i in casters])
         return footprint
-
-
-def _effect_rays_per_pixel(snapshot, area_px, footprint) -> np.ndarray:
-    """(n, 3) rays one pixel of each element costs per effect (shadows, reflections, refractions),
-    whether or not it is tagged for it (input of the measured cost model)."""
-    n_lights = len(snapshot.lights)
-    shadows = np.asarray(footprint, np.float64) / np.maximum(np.asarray(area_px, np.float64), 1.0)
-    return np.stack([shadows, np.full(len(shadows), 1.0 + n_lights),  # the reflection ray and its hit's shadow rays
-                     np.full(len(shadows), 2.0 + n_lights)], axis=1)  # in, out, and the hit's shadow rays
-
-
-def _expected_rays(area_px, effect_rays) -> np.ndarray:
-    """(n, 3) rays each (element, effect) item is expected to cast (before its learned ratio)."""
-    return np.asarray(area_px, np.float64)[:, None] * np.asarray(effect_rays, np.float64)
-
-
-def _flags_array(flags) -> np.ndarray:
-    return np.stack([flags["shadows"], flags["reflections"], flags["refractions"]], axis=1).astype(np.float64)

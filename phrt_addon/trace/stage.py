@@ -19,18 +19,19 @@ pixels of that frame's pattern (a shadow pixel takes the highest rate of the cas
 regions hold it); the other pixels are reconstructed from the layer's G-buffer (depth,
 normal, element id), and those that cannot be keep the raster term.
 Rays leave along the geometric normal (``LayerPixels.geometric_normals``).
-``embreex`` is imported only here, on the first traced frame.
+``embreex`` is imported only here, when a frame may trace (``prepare``) or traces.
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..scene import rules, shading
 from ..frame_types import TracedTerms, rows_of
 from .rates import element_rates, reconstruct, traced_subset
+from .trace_result import EFFECTS, TraceCounters, TraceResult, traced_effects
 from .reconstruction_guide import layer_guide
 from .pixel_tiles import ImageTiles
 from .shadow_region import PointChunks, TiledShadowRegions
@@ -70,9 +71,6 @@ def _attribute_to_pixels(element_rays, pixel_element, rays):
     _attribute(element_rays, elements, pixels, rays)
 
 
-EFFECTS = ("shadows", "reflections", "refractions")
-
-
 @dataclass
 class _Bounce:
     """One part of a frame's batch of bounce rays: an effect's rays from one layer."""
@@ -86,65 +84,6 @@ class _Bounce:
     origins: np.ndarray
     directions: np.ndarray
     blend: np.ndarray | None  # reflections: the traced share of each ray's colour
-
-
-def traced_effects(elements, selected, effects=None) -> dict[str, np.ndarray]:
-    """Per effect, the elements whose effect is traced: selected, tagged for it, and (when
-    ``effects`` names the effect) chosen for it."""
-    selected = np.asarray(selected, bool)
-    wanted = {}
-    for effect in EFFECTS:
-        tagged = np.fromiter((bool(getattr(element, effect)) for element in elements), bool, len(elements))
-        chosen = selected & tagged
-        if effects is not None and effect in effects:
-            chosen &= np.asarray(effects[effect], bool)
-        wanted[effect] = chosen
-    return wanted
-
-
-@dataclass
-class TraceCounters:
-    """Rays cast and ms spent per effect; ``upload_ms``: a static Embree build (one-time work)."""
-
-    shadow_rays: int = 0
-    reflection_rays: int = 0
-    refraction_rays: int = 0
-    shadow_ms: float = 0.0
-    reflection_ms: float = 0.0
-    refraction_ms: float = 0.0
-    upload_ms: float = 0.0
-    # Of shadow_ms, building the lights' shadow regions over the frame's pixels: a fixed part of
-    # any frame that traces shadows, whatever the casters' sizes (select/item_costs.py).
-    shadow_setup_ms: float = 0.0
-    # Of each effect's ms, the time inside Embree's queries (its per-ray part, numpy aside).
-    shadow_embree_ms: float = 0.0
-    reflection_embree_ms: float = 0.0
-    refraction_embree_ms: float = 0.0
-    # Per effect name, of its ms the edge-aware reconstruction of pixels not cast at a reduced
-    # rate, and how many pixels it filled (its cost per pixel: select/item_costs.py).
-    reconstruct_ms: dict = field(default_factory=dict)
-    reconstructed_px: dict = field(default_factory=dict)
-
-    @property
-    def rays(self):
-        return self.shadow_rays + self.reflection_rays + self.refraction_rays
-
-
-@dataclass
-class TraceResult:
-    traced: TracedTerms
-    counters: TraceCounters = field(default_factory=TraceCounters)
-    # (n_elements,) rays cast for each element, in the units of the counters: every ray of an effect
-    # (a bounce's hit shadow rays and further bounces included) goes to the elements whose pixels
-    # cast it, shared in proportion where casters' shadow regions overlap; summed, the counters' rays.
-    element_rays: np.ndarray = None
-    # (n_elements, 3) the same rays split by effect (EFFECTS order): what each item cast.
-    item_rays: np.ndarray = None
-    # (h, w) float32, the ``PHRT Rate`` debug pass: per pixel the highest rate of any effect (either
-    # layer) whose traced or reconstructed value replaced the raster term there, 0 elsewhere
-    # (row 0 at the bottom); ``effect_rate``: the same per effect name.
-    rate: np.ndarray | None = None
-    effect_rate: dict = field(default_factory=dict)
 
 
 class TraceStage:
@@ -161,6 +100,17 @@ class TraceStage:
         if self.trace_scene is not None:
             self.trace_scene.close()
             self.trace_scene = None
+
+    def prepare(self, snapshot, casts_shadow) -> float:
+        """Build the Embree scenes before any frame traces (the replay's first frame, one-time
+        work): the first traced frame then does not stall on the build.  Returns the ms spent
+        on a build (0 when the scenes were already in line with ``snapshot``)."""
+        from .embree_scene import TraceScene
+        if self.trace_scene is None:
+            self.trace_scene = TraceScene(self.threads)
+        builds = self.trace_scene.stats["static_builds"]
+        spent = self.trace_scene.update(snapshot, casts_shadow)
+        return spent if self.trace_scene.stats["static_builds"] != builds else 0.0
 
     def _prepared_texture(self, texture):
         """``rules.prepare_texture`` of a snapshot's texture, once per image (bounded)."""

@@ -97,6 +97,26 @@ def test_raster_mode_builds_no_embree_scene_and_traces_no_ray():
     assert result.stats["n_visible"] == 2 and result.stats["n_selected"] == 0
 
 
+def test_the_first_frame_that_may_trace_builds_the_embree_scenes_as_set_up():
+    """A replay's first frame with a visible candidate builds the Embree scenes (one-time work,
+    in its set-up) even when it traces nothing; the first frame that traces then builds none."""
+    tight = mirror_scene("HYBRID")
+    tight.settings = Settings(mode="HYBRID", budget_ms=1e-3)  # no time left: nothing selected
+    renderer = FrameRenderer(threads=1)
+    try:
+        first = renderer.render(tight, ReferenceRaster(tight, ray_cast_gbuffer(tight)))
+        assert first.stats["n_selected"] == 0 and first.stats["rays"] == 0
+        assert renderer.trace_scene is not None and renderer.trace_scene.stats["static_builds"] == 1
+        assert 0 < first.stats["upload_ms"] <= first.stats["setup_ms"]
+        assert first.stats["upload_ms"] <= first.stats["trace_ms"] <= first.stats["total_ms"]
+        renderer.forced_selection = frozenset({"Mirror", "Block"})
+        second = renderer.render(tight, ReferenceRaster(tight, ray_cast_gbuffer(tight)))
+        assert second.stats["reflection_rays"] > 0 and second.stats["shadow_rays"] > 0
+        assert second.stats["upload_ms"] == 0.0 and renderer.trace_scene.stats["static_builds"] == 1
+    finally:
+        renderer.close()
+
+
 def test_selected_mirror_shows_the_red_wall_where_raster_shows_the_environment():
     raster, gbuffer, _ = render(mirror_scene("RASTER"))
     traced, _, _ = render(mirror_scene("RAYTRACE"))

@@ -1,6 +1,8 @@
 """The rectangle a frame's traced effects can change (phrt_addon/trace/trace_rect.py): every
 pixel whose surface lies in a caster's shadow region and in the scene's bounds is inside it,
 and a frame read back in it is the same, pixel for pixel, as one read whole."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -128,6 +130,17 @@ def test_scene_bounds_hold_every_mesh():
     for mesh in snapshot.meshes:
         world = mesh.positions @ np.asarray(mesh.matrix_world)[:3, :3].T + np.asarray(mesh.matrix_world)[:3, 3]
         assert np.all(world >= low - 1e-9) and np.all(world <= high + 1e-9)
+
+
+def test_scene_bounds_leave_out_vertices_no_triangle_uses():
+    """A loose vertex far away (no triangle uses it) receives no shadow: not in the bounds."""
+    snapshot = mirror_scene("RAYTRACE")
+    expected = ElementBounds().scene_bounds(snapshot)
+    mesh = snapshot.meshes[0]
+    snapshot.meshes[0] = dataclasses.replace(mesh, positions=np.vstack([mesh.positions, [[500.0, -500.0, 900.0]]]),
+                                             geometry_key="floor with a loose vertex")
+    low, high = ElementBounds().scene_bounds(snapshot)
+    assert np.allclose(low, expected[0]) and np.allclose(high, expected[1])
 
 
 def test_a_frame_tracing_shadows_reads_back_a_rectangle_and_is_the_same_as_read_whole(monkeypatch):
