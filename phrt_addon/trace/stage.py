@@ -30,6 +30,7 @@ import numpy as np
 
 from ..scene import rules, shading
 from ..frame_types import TracedTerms, rows_of
+from ..gather import take_rows
 from .rates import element_rates, reconstruct, traced_subset
 from .trace_result import EFFECTS, TraceCounters, TraceResult, traced_effects
 from .reconstruction_guide import layer_guide
@@ -86,6 +87,40 @@ class _Bounce:
     blend: np.ndarray | None  # reflections: the traced share of each ray's colour
 
 
+def _union(index_arrays, size: int):
+    """(the sorted union of ``index_arrays``, indices in 0..size-1; for each index its row in
+    that union): by a mask, not a sort (a light's shadow pixels are tens of thousands)."""
+    if len(index_arrays) == 1:  # one light: its pixels are already sorted and distinct
+        union = np.asarray(index_arrays[0], np.intp)
+        row_of = np.zeros(size, np.intp)
+        row_of[union] = np.arange(len(union))
+        return union, row_of
+    member = np.zeros(size, bool)
+    for index in index_arrays:
+        member[index] = True
+    return np.flatnonzero(member), np.cumsum(member, dtype=np.intp) - 1
+
+
+def _rows(array, index):
+    """``array``'s rows ``index`` (sorted, distinct): the array itself when they are all of them
+    (one light: no copy)."""
+    return array if len(index) == len(array) else take_rows(array, index)
+
+
+def _joined(arrays):
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+
+def ray_start(scene, pixels, idx, view_dirs, points_trace=None):
+    """Trace-frame points (given, or of the pixels ``idx``), their geometric normals facing the
+    camera and ray offsets."""
+    if points_trace is None:
+        points_trace = scene.to_trace(pixels.world(idx))  # only the pixels that get rays
+    normal = pixels.geometric_normals(idx, view_dirs)
+    eps = scene.epsilon(points_trace, pixels.camera_distance(idx), element=pixels.element[idx])
+    return points_trace, normal, eps
+
+
 class TraceStage:
     """Owns what tracing keeps between frames of a replay."""
 
@@ -111,6 +146,51 @@ class TraceStage:
         builds = self.trace_scene.stats["static_builds"]
         spent = self.trace_scene.update(snapshot, casts_shadow)
         return spent if self.trace_scene.stats["static_builds"] != builds else 0.0
+
+    @staticmethod
+    def _trace_shadows(lit, layer_name, pixels, scene, traced, counters, item_rays, casters, filled):
+        """Every light's shadow rays of one layer as one batch.  Only the pixels cast this frame
+        are prepared (world position, view direction, normals, offsets), each once however many
+        lights' regions hold it; at a reduced rate that work shrinks with the rays.  The others
+        are reconstructed; one facing away from the light gets a value it never uses.  Per ray
+        the same origin, direction and length as light by light: the same visibility (arcade's
+        ten lights cost ten passes over mostly the same pixels and ten Embree calls)."""
+        cast_pixels, row_of = _union([idx[cast] for _, _, idx, cast, _, _ in lit], len(pixels))
+        points = scene.to_trace(pixels.world(cast_pixels))
+        view_dirs = pixels.view_directions(cast_pixels)
+        normals = pixels.normals(cast_pixels, view_dirs)
+        rays = []  # per light: (light index, its pixels, cast, rates, caster regions, rays' pixels, rows, dirs, lengths)
+        for light_index, light, idx, cast, pixel_rate, caster_regions in lit:
+            rows = row_of[idx[cast]]
+            direction, distance, _ = shading.light_incidence(light, _rows(points, rows), scene.origin)
+            facing = shading.dot(_rows(normals, rows), direction) > 0  # the BRDF is zero elsewhere
+            keep = ~cast
+            keep[np.flatnonzero(cast)[facing]] = True
+            if not np.any(keep):
+                continue
+            rays.append((light_index, idx[keep], cast[keep], pixel_rate[keep], caster_regions,
+                         idx[cast][facing], rows[facing], rows_of(direction, facing), np.compress(facing, distance)))
+        if not rays:
+            return
+        # The offsets of the pixels some light's ray leaves from, each pixel's once.
+        leaving, at_leaving = _union([ray[6] for ray in rays], len(cast_pixels))
+        origins, normal, eps = ray_start(scene, pixels, cast_pixels[leaving], _rows(view_dirs, leaving),
+                                         _rows(points, leaving))
+        at = [at_leaving[ray[6]] for ray in rays]
+        starts = _joined([_rows(origins, a) + _rows(normal, a) * _rows(eps, a)[:, None] for a in at])
+        lengths = _joined([ray[8] - 2 * _rows(eps, a) for ray, a in zip(rays, at)])
+        blocked = scene.occluded(starts, _joined([ray[7] for ray in rays]), lengths)
+        offset = 0
+        for light_index, idx, cast, pixel_rate, caster_regions, ray_idx, *_ in rays:
+            visible = np.where(blocked[offset:offset + len(ray_idx)], 0.0, 1.0).astype(np.float32)
+            offset += len(ray_idx)
+            traced.shadow_visibility[(layer_name, light_index)] = filled(
+                "shadows", layer_name, pixels, idx, cast, visible, pixel_rate)
+            traced.shadow_owners[(layer_name, light_index)] = (pixels.flat[idx], idx, list(casters), caster_regions)
+            counters.shadow_rays += len(ray_idx)
+            # A ray in overlapping casters' regions is shared between them.
+            _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region
+                                               in caster_regions], len(ray_idx))
 
     def _prepared_texture(self, texture):
         """``rules.prepare_texture`` of a snapshot's texture, once per image (bounded)."""
@@ -223,15 +303,6 @@ class TraceStage:
             np.maximum.at(effect_rate[effect], flat, np.broadcast_to(pixel_rate, flat.shape).astype(np.float32))
             return flat, values
 
-        def ray_start(pixels, idx, view_dirs, points_trace=None):
-            """Trace-frame points (given, or of the pixels ``idx``), their geometric normals facing
-            the camera and ray offsets."""
-            if points_trace is None:
-                points_trace = scene.to_trace(pixels.world(idx))  # only the pixels that get rays
-            normal = pixels.geometric_normals(idx, view_dirs)
-            eps = scene.epsilon(points_trace, pixels.camera_distance(idx), element=pixels.element[idx])
-            return points_trace, normal, eps
-
         # Shadows: for each light, the pixels a selected caster can shadow get traced visibility.
         start = time.perf_counter()
         embree_before = scene.stats["embree_ms"]
@@ -240,6 +311,7 @@ class TraceStage:
             if not casters or len(pixels) == 0:
                 continue
             chunks = None
+            lit = []  # per light: (light index, light, its pixels, cast this frame, their rates, caster regions)
             for light_index, light in enumerate(snapshot.lights):
                 if not light.cast_shadows:
                     continue
@@ -259,33 +331,9 @@ class TraceStage:
                 for caster, caster_region in zip(casters, caster_regions):
                     pixel_rate = np.where(caster_region[idx], np.maximum(pixel_rate, rate_of["shadows"][caster]),
                                           pixel_rate)
-                # Only the pixels cast this frame are prepared (world position, light, facing,
-                # offsets): at a reduced rate that work shrinks with the rays.  The others are
-                # reconstructed; one facing away from the light gets a value it never uses.
-                cast = rated(pixels, idx, pixel_rate)
-                cast_idx = idx[cast]
-                points_trace = scene.to_trace(pixels.world(cast_idx))
-                direction, distance, _ = shading.light_incidence(light, points_trace, scene.origin)
-                view_dirs = pixels.view_directions(cast_idx)
-                facing = shading.dot(pixels.normals(cast_idx, view_dirs), direction) > 0  # the BRDF is zero elsewhere
-                ray_idx, direction, view_dirs, points_trace = cast_idx[facing], rows_of(direction, facing), \
-                    rows_of(view_dirs, facing), rows_of(points_trace, facing)
-                distance = np.compress(facing, distance)
-                keep = ~cast
-                keep[np.flatnonzero(cast)[facing]] = True
-                idx, cast, pixel_rate = idx[keep], cast[keep], pixel_rate[keep]
-                if len(idx) == 0:
-                    continue
-                points_trace, normal, eps = ray_start(pixels, ray_idx, view_dirs, points_trace)
-                blocked = scene.occluded(points_trace + normal * eps[:, None], direction, distance - 2 * eps)
-                traced.shadow_visibility[(layer_name, light_index)] = filled(
-                    "shadows", layer_name, pixels, idx, cast, np.where(blocked, 0.0, 1.0).astype(np.float32),
-                    pixel_rate)
-                traced.shadow_owners[(layer_name, light_index)] = (pixels.flat[idx], idx, list(casters), caster_regions)
-                counters.shadow_rays += len(ray_idx)
-                # A ray in overlapping casters' regions is shared between them.
-                _attribute(item_rays[:, 0], casters, [np.count_nonzero(caster_region[ray_idx]) for caster_region
-                                                   in caster_regions], len(ray_idx))
+                lit.append((light_index, light, idx, rated(pixels, idx, pixel_rate), pixel_rate, caster_regions))
+            if lit:
+                self._trace_shadows(lit, layer_name, pixels, scene, traced, counters, item_rays, casters, filled)
         counters.shadow_ms = _ms(start)
         counters.shadow_embree_ms = scene.stats["embree_ms"] - embree_before
         # Reflections and refractions are bounces: none with max_bounces 0 (the raster result stays).
@@ -313,7 +361,7 @@ class TraceStage:
             cast = rated(pixels, wanted_idx, pixel_rate)
             idx = wanted_idx[cast]
             view_dirs = pixels.view_directions(idx)
-            points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
+            points_trace, normal, eps = ray_start(scene, pixels, idx, view_dirs)
             direction = leave_surface(shading.reflect(view_dirs, pixels.normals(idx, view_dirs)), normal)
             parts.append(_Bounce("reflections", layer_name, pixels, wanted_idx, cast, element_of[idx], pixel_rate,
                                  points_trace + normal * eps[:, None], direction,
@@ -331,7 +379,7 @@ class TraceStage:
             idx = wanted_idx[cast]
             if len(idx):
                 view_dirs = pixels.view_directions(idx)
-                points_trace, normal, eps = ray_start(pixels, idx, view_dirs)
+                points_trace, normal, eps = ray_start(scene, pixels, idx, view_dirs)
                 ior = materials.ior[pixels.material[idx]]
                 direction, _ = shading.refract(view_dirs, pixels.normals(idx, view_dirs), 1.0 / ior)
                 direction = leave_surface(direction, normal, side=-1.0)
