@@ -23,7 +23,8 @@ Stages (the columns of frames.csv, docs/formats.md):
 
 Pay only for what is used: RASTER never touches the tracer (``embreex`` is not
 even imported) nor reads the layers back, no lights means no shadow work, and no
-selected element means no Embree work at all.
+candidate in view means no Embree work at all (the first frame with one builds the Embree
+scenes, whether it traces or not).
 """
 from __future__ import annotations
 
@@ -184,16 +185,17 @@ class FrameRenderer:
 
         # -- ray tracing ------------------------------------------------------
         start = _timer()
-        # The replay's first frame builds what any later frame would stall on at its first trace
-        # (the Embree scenes, every mesh's bounds): one-time work, in that frame's set-up.
-        prepare_ms = self._prepare_tracing(snapshot, materials) if may_trace and self.frames_rendered == 0 else 0.0
+        # The replay's first frame that may trace builds what a later frame would stall on at its
+        # first trace (the Embree scenes, every mesh's bounds): one-time work, in its set-up.
+        prepare_ms = self._prepare_tracing(snapshot, materials) if may_trace and self.trace_scene is None else 0.0
         traced_frame = TraceResult(traced=None, element_rays=np.zeros(n_elements))
         if np.any(selected) and may_trace:
             if layers is None:  # only a frame that traces reads the layers back (a trace cost)
                 begin, wanted = _timer(), traced_effects(snapshot.elements, selected, selection.effects)
                 layers = read_layers(self.ray_pixels(snapshot, selected, selection.effects), trace_rect(
-                    snapshot, wanted, element_bounds, self.element_bounds.scene_bounds(snapshot), raster.width,
-                    raster.height, self.shadow_hulls) if self.crop_readback else None)
+                    snapshot, wanted, element_bounds, self.element_bounds.scene_bounds(snapshot) if np.any(
+                        wanted["shadows"]) and shadow_lights else None, raster.width, raster.height,
+                    self.shadow_hulls) if self.crop_readback else None)
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
                                                 effects=selection.effects,
@@ -305,11 +307,10 @@ class FrameRenderer:
         return np.r_[wanted["reflections"] | wanted["refractions"], False]
 
     def _prepare_tracing(self, snapshot, materials) -> float:
-        """Build the Embree scenes and warm the meshes' bounds the shadows' read-back rectangle
-        needs (``trace_rect``); returns the ms spent (one-time work: both are kept for later
-        frames, per mesh)."""
+        """Build the Embree scenes and the meshes' bounds (``trace_rect``'s, for shadows), both kept
+        for later frames; returns the ms spent (one-time work)."""
         start = _timer()
-        if any(light.cast_shadows for light in snapshot.lights):
+        if any(light.cast_shadows for light in snapshot.lights):  # (kept per mesh)
             self.element_bounds.scene_bounds(snapshot)
         self.trace_stage.prepare(snapshot, materials.casts_shadow[:len(snapshot.materials)])
         return _ms(start)

@@ -19,7 +19,8 @@ pixels of that frame's pattern (a shadow pixel takes the highest rate of the cas
 regions hold it); the other pixels are reconstructed from the layer's G-buffer (depth,
 normal, element id), and those that cannot be keep the raster term.
 Rays leave along the geometric normal (``LayerPixels.geometric_normals``).
-``embreex`` is imported only here, when a frame may trace (``prepare``) or traces.
+``embreex`` is imported only through ``embree_scene.py``: by ``prepare``, on the replay's first frame
+that may trace (a candidate in view, not RASTER), or else by its first traced frame.
 """
 from __future__ import annotations
 
@@ -137,9 +138,9 @@ class TraceStage:
             self.trace_scene = None
 
     def prepare(self, snapshot, casts_shadow) -> float:
-        """Build the Embree scenes before any frame traces (the replay's first frame, one-time
-        work): the first traced frame then does not stall on the build.  Returns the ms spent
-        on a build (0 when the scenes were already in line with ``snapshot``)."""
+        """Bring the Embree scenes in line with ``snapshot``: built before the first frame that
+        traces (``FrameRenderer``), then checked by every traced frame.  Returns the ms of a
+        static build (one-time work), 0 when there was none."""
         from .embree_scene import TraceScene
         if self.trace_scene is None:
             self.trace_scene = TraceScene(self.threads)
@@ -254,20 +255,14 @@ class TraceStage:
         (element, effect) items; by default every tagged effect of a selected element.
         ``rates`` (optional): per effect name a float array over elements of the rate each
         element's effect is traced at (one of ``rates.RATES``; 1.0 where not given)."""
-        from .embree_scene import TraceScene
         from .tracer import RadianceTracer, leave_surface, reflection_blend
 
         counters = TraceCounters()
         item_rays = np.zeros((len(snapshot.elements), len(EFFECTS)))
         wanted_effects = traced_effects(snapshot.elements, selected, effects)
-        if self.trace_scene is None:
-            self.trace_scene = TraceScene(self.threads)
-        static_builds = self.trace_scene.stats["static_builds"]
-        update_ms = self.trace_scene.update(snapshot, materials.casts_shadow[:len(snapshot.materials)])
         # Only a build of the static scene is one-time work; checking that nothing changed and
         # rebuilding the moving objects' scene recur every frame (the cost model learns them).
-        if self.trace_scene.stats["static_builds"] != static_builds:
-            counters.upload_ms = update_ms
+        counters.upload_ms = self.prepare(snapshot, materials.casts_shadow[:len(snapshot.materials)])
         scene = self.trace_scene
         textures = {index: self._prepared_texture(m.texture) for index, m in enumerate(snapshot.materials)
                     if m.texture is not None}

@@ -102,7 +102,7 @@ def union_rect(rects, width: int, height: int):
 
 def trace_rect(snapshot, wanted: dict, element_bounds, scene_bounds, width: int, height: int, hulls=None):
     """The rectangle holding every pixel the traced effects ``wanted`` ({effect: (n,) bool},
-    ``stage.traced_effects``) can change or cast rays from, or None (read the whole frame).
+    ``trace_result.traced_effects``) can change or cast rays from, or None (read the whole frame).
     ``hulls``: a replay's ``ShadowHulls`` (None: each hull computed)."""
     rects = []
     leaving = np.flatnonzero(wanted["reflections"] | wanted["refractions"])

@@ -117,6 +117,24 @@ def test_the_first_frame_that_may_trace_builds_the_embree_scenes_as_set_up():
         renderer.close()
 
 
+def test_a_later_first_frame_that_may_trace_builds_and_traces_at_once():
+    """A renderer that drew RASTER frames first builds the Embree scenes on its first frame that
+    may trace, which here traces too: one build, counted once as set-up."""
+    renderer = FrameRenderer(threads=1)
+    try:
+        raster = mirror_scene("RASTER")
+        renderer.render(raster, ReferenceRaster(raster, ray_cast_gbuffer(raster)))
+        assert renderer.trace_scene is None
+        hybrid = mirror_scene("HYBRID")
+        renderer.forced_selection = frozenset({"Mirror"})
+        result = renderer.render(hybrid, ReferenceRaster(hybrid, ray_cast_gbuffer(hybrid)))
+        assert result.stats["reflection_rays"] > 0 and renderer.trace_scene.stats["static_builds"] == 1
+        assert 0 < result.stats["upload_ms"] <= result.stats["setup_ms"]
+        assert result.stats["upload_ms"] <= result.stats["trace_ms"]
+    finally:
+        renderer.close()
+
+
 def test_selected_mirror_shows_the_red_wall_where_raster_shows_the_environment():
     raster, gbuffer, _ = render(mirror_scene("RASTER"))
     traced, _, _ = render(mirror_scene("RAYTRACE"))

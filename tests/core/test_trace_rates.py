@@ -225,3 +225,41 @@ def test_refractions_at_a_reduced_rate(rate, mad):
         difference = np.abs(values - values_at(reference.traced.refraction, where)).mean()
         assert difference < mad, (rate, frame, difference, full_values.max())
         assert set(np.unique(result.effect_rate["refractions"])) == {0.0, rate}
+
+
+@pytest.mark.parametrize("rate", [1.0, 0.5])
+def test_every_lights_shadow_rays_as_one_batch_give_each_light_its_own_result(rate):
+    """The lights' shadow rays of a layer leave as one batch (``TraceStage._trace_shadows``): each
+    light gets the visibility, owners, ray count and per-item rays it gets traced alone (the other
+    lights casting no shadow), at full and at a reduced rate, with a third light under the floor
+    that only a few pixels face."""
+    lights = [Light("Sun", "SUN", (3.0, 3.0, 3.0), direction=(0.5, -0.7, -0.6)),
+              Light("Lamp", "POINT", (60.0, 60.0, 60.0), position=(0.4, -1.6, 2.2)),
+              Light("Under", "POINT", (60.0, 60.0, 60.0), position=(1.5, 0.0, -3.0))]
+    snapshot = scene()
+    snapshot.lights = lights
+    gbuffer = ray_cast_gbuffer(snapshot)
+    rates = {"shadows": np.full(len(snapshot.elements), rate)}
+    together = trace(snapshot, gbuffer, rates)
+    assert together.counters.shadow_rays > 0
+    alone_rays = np.zeros(len(snapshot.elements))
+    alone_count = 0
+    for index in range(len(lights)):
+        snapshot.lights = [light if i == index else Light(light.name, light.kind, light.color, light.position,
+                                                          light.direction, cast_shadows=False)
+                           for i, light in enumerate(lights)]
+        alone = trace(snapshot, gbuffer, rates)
+        alone_rays += alone.item_rays[:, 0]
+        alone_count += alone.counters.shadow_rays
+        for key in [key for key in alone.traced.shadow_visibility if key[1] == index]:
+            for mine, theirs in zip(together.traced.shadow_visibility[key], alone.traced.shadow_visibility[key]):
+                assert np.array_equal(mine, theirs)
+            owners, owners_alone = together.traced.shadow_owners[key], alone.traced.shadow_owners[key]
+            assert np.array_equal(owners[0], owners_alone[0]) and np.array_equal(owners[1], owners_alone[1])
+            assert owners[2] == owners_alone[2]
+            assert all(np.array_equal(a, b) for a, b in zip(owners[3], owners_alone[3]))
+        assert {key for key in together.traced.shadow_visibility if key[1] == index} == \
+            {key for key in alone.traced.shadow_visibility if key[1] == index}
+    assert {0, 1} <= {key[1] for key in together.traced.shadow_visibility}  # the batch held several lights
+    assert together.counters.shadow_rays == alone_count
+    assert np.allclose(together.item_rays[:, 0], alone_rays)
