@@ -33,7 +33,8 @@ SWEEP_COLUMNS = ("run", "mode", "cost_mode", "budget_ms", "mean_ms", "p95_ms", "
                  "flips_per_100", "popping", "item_popping", "scene", "path", "variant", "budget_at", "selection_weight",
                  "selection_order", "relevance", "frames", "mean_selected", "regret_frames", "regret_share",
                  "captured", "captured_lo", "captured_hi", "judged_frames", "min_regret", "beat_oracle",
-                 "p95_over_budget", "within_budget", "first_frame_ms", "variant_name")
+                 "p95_over_budget", "within_budget", "first_frame_ms", "variant_name", "speed_vs_raster",
+                 "time_left_share")
 
 
 # The paper's Table II (ms per frame: raster, hybrid, ray tracing) and which of its

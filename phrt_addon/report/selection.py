@@ -69,6 +69,9 @@ class RunRegret:
     differs: int = 0
     overran: int = 0  # judged frames whose choice cost, by the oracle's measurements, more than the budget's
     lost_share: float | None = None  # 1 - captured share
+    # The run's own T over the oracle's capacity, summed over the judged frames: how much of the
+    # budget's nominal time for tracing the run still had after its bookkeeping and the machine's drift.
+    time_left_share: float | None = None
     judged: Captured = field(default_factory=Captured)  # the captured share over the judged frames
     oracle_only: dict = field(default_factory=dict)
     heuristic_only: dict = field(default_factory=dict)
@@ -111,8 +114,18 @@ def run_regrets(runs, results):
             overran=sum(1 for row in rows if row["capacity_ms"] is not None and row["heuristic_cost_ms"] is not None
                         and row["heuristic_cost_ms"] > row["capacity_ms"] + 1e-9),
             lost_share=None if share.share is None else 1.0 - share.share,
+            time_left_share=time_left_share(rows),
             oracle_only=oracle_only, heuristic_only=heuristic_only, judged=share)
     return regrets
+
+
+def time_left_share(rows) -> float | None:
+    """Sum of the runs' T over the sum of the oracle's capacity on the frames that have both
+    (None when the capacity sums to 0: nothing to share)."""
+    pairs = [(row["time_left_ms"], row["capacity_ms"]) for row in rows
+             if row.get("time_left_ms") is not None and row.get("capacity_ms") is not None]
+    capacity = float(sum(pair[1] for pair in pairs))
+    return float(sum(pair[0] for pair in pairs)) / capacity if capacity > 0 else None
 
 
 def variant_label(variant) -> str:
@@ -133,6 +146,8 @@ def sweep_rows(runs, errors, regrets, pops, references):
     rows = []
     for run in runs:
         outcome = errors[id(run)]
+        raster = next((other for other in runs if other.mode == "RASTER" and other.scene == run.scene
+                       and other.path == run.path), None)
         regret = regrets.get(id(run))
         pop = pops.get(id(run))
         hybrid = run.mode == "HYBRID"
@@ -162,6 +177,9 @@ def sweep_rows(runs, errors, regrets, pops, references):
             "p95_over_budget": steady.over_budget(run.steady("p95"), budget_ms),
             "within_budget": run.within_budget() if hybrid else None,
             "first_frame_ms": run.first_frame_ms, "variant_name": run.variant_name,
+            "speed_vs_raster": steady.speed_against(run.frames, raster.frames)
+            if raster is not None and raster is not run else None,
+            "time_left_share": regret.time_left_share if regret is not None else None,
         })
     return rows
 

@@ -64,3 +64,23 @@ def over_budget(p95_ms, budget_ms) -> float | None:
     """p95 / budget (None without a positive budget)."""
     p95, budget = _finite(p95_ms), _finite(budget_ms)
     return None if p95 is None or not budget or budget <= 0 else p95 / budget
+
+
+def speed_against(frame_rows, reference_rows, column: str = "gbuffer_ms") -> float | None:
+    """How much slower the machine ran during a run than during ``reference_rows`` (the raster
+    run a sweep's budgets were set from): the median, over the steady frames both runs have, of
+    ``column`` here / there.  The G-buffer is the same work in every mode and selection, so 1.3
+    says every ms the raster half took when the budget was set took 1.3 ms in this run: the time
+    left for tracing shrank by that, for every variant alike (this kind of machine drifts by
+    tens of percent within minutes).  None without a common frame with both values positive."""
+    reference = {}
+    for row in steady_rows(reference_rows):
+        value = _finite(row.get(column))
+        if value is not None and value > 0:
+            reference[int(row["frame"])] = value
+    ratios = []
+    for row in steady_rows(frame_rows):
+        value, there = _finite(row.get(column)), reference.get(int(row["frame"]))
+        if value is not None and value > 0 and there is not None:
+            ratios.append(value / there)
+    return float(np.median(ratios)) if ratios else None

@@ -41,7 +41,9 @@ def make_run(root, name, mode, total_ms, amount, budget_at=None, budget_ms=150.0
         log.add_frame({"frame": frame, "mode": mode, "total_ms": total_ms + frame, "raster_ms": 20.0,
                        "select_ms": 0.5, "trace_ms": 1.0, "composite_ms": 1.0, "budget_ms": budget_ms,
                        "predicted_trace_ms": 1.0, "n_candidates": 1, "n_visible": 1,
-                       "n_selected": int(selected), "rays": 10, "time_left_ms": 5.0},
+                       "n_selected": int(selected), "rays": 10, "time_left_ms": 5.0,
+                       # the G-buffer 1.25x slower in the hybrid runs than in the raster run: the machine's drift
+                       "gbuffer_ms": (1.25 if mode == "HYBRID" else 1.0) * (10.0 + frame)},
                       [{"frame": frame, "element": "Mirror", "visible": True, "A": 0.1, "P": 0.9, "D": 2.0,
                         "V": 1.0, "Q": 1.0, "C": 1.0, "K": 1.0, "S": 0, "R": 1.0, "selected": selected,
                         "reason": "" if selected else "over_budget"}])
@@ -103,7 +105,11 @@ def test_sweep_csv_has_the_contract_columns_and_one_row_per_run(sweep):
     assert float(hybrid["captured"]) == pytest.approx(0.6) and float(hybrid["regret_share"]) == pytest.approx(0.4)
     assert int(hybrid["judged_frames"]) == 1 and hybrid["captured_lo"] == ""  # one frame: no interval
     assert hybrid["variant_name"] == "measured"
+    # The machine's drift against the raster run the budgets came from, and T against the oracle's capacity.
+    assert float(hybrid["speed_vs_raster"]) == pytest.approx(1.25)
+    assert float(hybrid["time_left_share"]) == pytest.approx(1.0)  # T 5 ms against 40 - 35
     raster = next(row for row in rows if row["mode"] == "RASTER")
+    assert raster["speed_vs_raster"] == "" and raster["time_left_share"] == ""
     assert raster["budget_ms"] == "" and raster["regret"] == "" and float(raster["flip"]) > float(hybrid["flip"])
 
 
