@@ -5,7 +5,7 @@
                       [--budget-ms T] [--resolution WxH] [--out DIR] [--images exr|png|none] [--overwrite]
                       [--selection paper|benefit]
     phrt report RUN_DIR... [--reference RUN_DIR] [--out DIR]
-    phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]]
+    phrt sweep SCENE [--path NAME] [--frames A-B] [--budgets N | --budget-at F[,F...]] [--lockstep]
                      [--resolution WxH] [--out DIR] [--oracle-every K] [--variants NAME,...]
                      [--selection paper|benefit]
                      [--workers N [--dashboard ADDRESS] | --scheduler ADDRESS [--tls-ca-file F
@@ -91,6 +91,10 @@ def build_parser():
     sweep.add_argument("--variants", metavar="NAME[,NAME...]",
                        help="selection variants of the hybrid runs (default all: measured, papercost, i0, i0.1, "
                             "rperms, error)")
+    sweep.add_argument("--lockstep", action="store_true",
+                       help="render the hybrid runs of the path together, frame by frame, so that every budget and "
+                            "variant meets the machine in the same state (a comparison free of the machine's drift "
+                            "between runs; in this process, not with --workers or --scheduler)")
     sweep.add_argument("--workers", type=count, default=None, metavar="N",
                        help="run the plan on a Dask LocalCluster of N worker processes on this machine "
                             "(default: one run after the other in this process)")
@@ -256,7 +260,14 @@ def command_sweep(args):
                                       selection=args.selection)
     except plan_module.PlanError as error:
         raise UserError(str(error)) from None
-    executor = cluster.start_executor(args.workers, args.scheduler, cluster_options)
+    if args.lockstep and (args.workers is not None or args.scheduler is not None):
+        raise UserError("--lockstep renders the hybrid runs together in this process: not with --workers or "
+                        "--scheduler")
+    if args.lockstep:
+        from .lockstep import LockstepExecutor
+        executor = LockstepExecutor()
+    else:
+        executor = cluster.start_executor(args.workers, args.scheduler, cluster_options)
     try:
         return _run_sweep(plan, folder, label, camera.name, frame_range, resolution, executor)
     finally:

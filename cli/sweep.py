@@ -47,7 +47,7 @@ def _load(scene_name):
         blender_process.load_scene(scene_name)
 
 
-def _open_scene(plan, job):
+def open_scene(plan, job):
     """Open the job's scene (on the main thread: Blender opens files only there); the first time in
     this process, render one throw-away frame so that no run pays the process's one-time costs
     (shader compiles, the driver's first draw, shadow maps, which stay cached) in its first frame
@@ -68,6 +68,22 @@ def _open_scene(plan, job):
     return scene, camera
 
 
+def redo_reason(plan, folder, job) -> str | None:
+    """Why ``job`` runs (``no run yet``, ``frames 1-3 -> 4-6``...), None when it is complete: a run
+    only when its recorded work is the job's (``plan.run_redo_reason``)."""
+    if job.kind == "run":
+        scene_name, _, _ = plan.target(job)
+        wanted = plan_module.wanted_work(plan, job, blender_process.scene_file(scene_name))
+        return plan_module.run_redo_reason(folder / job.id, plan, wanted)
+    return None if plan_module.job_is_complete(plan, folder, job) else "no run yet"
+
+
+def clear_dead_attempts(folder, job):
+    """Remove what an attempt of ``job`` that died left."""
+    for stale in plan_module.dead_attempts(folder, job):
+        shutil.rmtree(plan_module.inside(folder, stale), ignore_errors=True)
+
+
 def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
     """Run job ``job_id`` of the plan at ``plan_path`` unless it is complete."""
     plan_path = Path(plan_path)
@@ -76,19 +92,12 @@ def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
     try:
         plan = plan_module.read_plan(plan_path)
         job = plan.job(plan_module.check_job_id(job_id))
-        redo = None
-        if job.kind == "run":
-            scene_name, _, _ = plan.target(job)
-            wanted = plan_module.wanted_work(plan, job, blender_process.scene_file(scene_name))
-            redo = plan_module.run_redo_reason(folder / job.id, plan, wanted)
-            if redo is None:
-                return plan_module.JobOutcome(job.id, "skipped", message="complete")
-        elif plan_module.job_is_complete(plan, folder, job):
+        redo = redo_reason(plan, folder, job)
+        if redo is None:
             return plan_module.JobOutcome(job.id, "skipped", message="complete")
-        for stale in plan_module.dead_attempts(folder, job):  # what an attempt that died left
-            shutil.rmtree(plan_module.inside(folder, stale), ignore_errors=True)
+        clear_dead_attempts(folder, job)
         partial = plan_module.partial_dir(folder, job)
-        scene, camera = _open_scene(plan, job)
+        scene, camera = open_scene(plan, job)
         try:
             with blender_process.quiet_stdout():
                 message = _run(plan, folder, job, scene, camera, partial)
@@ -105,20 +114,26 @@ def execute_job(plan_path, job_id) -> plan_module.JobOutcome:
     return plan_module.JobOutcome(job.id, "done", time.perf_counter() - begin, message)
 
 
+def run_arguments(plan, folder, job) -> dict:
+    """The keyword arguments of a run job's replay (``replay.replay`` or ``replay.ReplayRun``): EXR
+    images at the plan's resolution, its budget, its references (the plan's raster and raytrace
+    runs of its path, where a budget at F finds its milliseconds) and its settings."""
+    _, label, path = plan.target(job)
+    references = [dependency for dependency in job.depends_on
+                  if plan.job(dependency).mode in ("RASTER", "RAYTRACE")]
+    if not references:
+        references = [plan_module.run_id(label, path, mode) for mode in ("RASTER", "RAYTRACE")]
+    return {"images": "exr", "resolution": tuple(plan.resolution), "scene_label": label,
+            "budget_at": job.budget_at, "budget_ms": job.budget_ms,
+            "budget_search_dirs": [folder / reference for reference in references], "overrides": job.overrides}
+
+
 def _run(plan, folder, job, scene, camera, partial) -> str:
     """Write the job's directory at ``partial``; returns a one-line account."""
     frames = (plan.frames[0], plan.frames[1])
     resolution = tuple(plan.resolution)
-    _, label, path = plan.target(job)
     if job.kind == "run":
-        references = [dependency for dependency in job.depends_on
-                      if plan.job(dependency).mode in ("RASTER", "RAYTRACE")]
-        if not references:
-            references = [plan_module.run_id(label, path, mode) for mode in ("RASTER", "RAYTRACE")]
-        result = replay.replay(scene, camera, frames, job.mode, partial, images="exr", resolution=resolution,
-                               scene_label=label, budget_at=job.budget_at, budget_ms=job.budget_ms,
-                               budget_search_dirs=[folder / reference for reference in references],
-                               overrides=job.overrides)
+        result = replay.replay(scene, camera, frames, job.mode, partial, **run_arguments(plan, folder, job))
         if result.cancelled and result.signal:
             raise SweepInterrupted(result.signal, job.id, result.frames_done)
         if result.cancelled:

@@ -8,12 +8,17 @@ frame, variants measured (the paper's), error, benefit and tiers (those the swee
 Then one table, variant x budget x path: the captured share of the oracle's
 error reduction with its 90% interval, pops per 100 frames, p95 / budget, the
 share of frames within budget, printed and written to ``OUT/selection_eval.csv``
-and ``OUT/selection_eval.md``.  LONG (hours at 200+ frames per path); a sweep
-already complete is reused, so an interrupted evaluation resumes.
+and ``OUT/selection_eval.md``, with how far the machine drifted between the raster run the
+budgets came from and the hybrid runs (their G-buffer ms over the raster run's) and the share of
+the oracle's time each run still had.  The hybrid runs of a path are rendered in lockstep
+(``phrt sweep --lockstep``: frame by frame together, so that every budget and variant meets the
+machine in the same state; ``--one-after-another`` for the plain sweep).  LONG (hours at 200+
+frames per path); a sweep already complete is reused, so an interrupted evaluation resumes.
 
     python tools/selection_eval.py [--out out/selection-eval] [--frames 1-240]
         [--paths arcade/path3,atrium/path2,atrium/path3,showcase/orbit] [--budget-at 0.1,...]
         [--variants measured,error,benefit,tiers] [--oracle-every 4] [--resolution 320x240]
+        [--one-after-another]
 
 The showcase scene has no camera path of its own: this tool saves it with the
 camera orbiting the objects over the frames (``showcase.blend`` in OUT, path
@@ -98,7 +103,8 @@ def evaluate(args) -> list:
         if not args.table_only:
             status = cli.main(["sweep", scene, "--path", path, "--frames", args.frames, "--budget-at", args.budget_at,
                                "--variants", variants, "--oracle-every", str(args.oracle_every),
-                               "--resolution", args.resolution, "--out", str(sweep_dir)])
+                               "--resolution", args.resolution, "--out", str(sweep_dir)]
+                              + ([] if args.one_after_another else ["--lockstep"]))
             if status >= 128:  # a signal stopped it: so it stops the evaluation (rerun to resume)
                 raise EvaluationInterrupted(status)
             if status != 0:
@@ -163,6 +169,10 @@ def main(argv=None) -> int:
     parser.add_argument("--variants", default=DEFAULT_VARIANTS)
     parser.add_argument("--oracle-every", type=int, default=4)
     parser.add_argument("--resolution", default="320x240")
+    parser.add_argument("--one-after-another", action="store_true",
+                        help="run the hybrid runs one after the other, not in lockstep (phrt sweep --lockstep: "
+                             "every budget and variant of a path rendered frame by frame together, so that they "
+                             "meet the machine in the same state)")
     parser.add_argument("--table-only", action="store_true",
                         help="only (re)write the table from the sweeps already in --out")
     args = parser.parse_args(argv)

@@ -1,0 +1,151 @@
+"""``phrt sweep --lockstep``: the hybrid runs of a path rendered together, frame by frame, so that
+every budget and variant meets the machine in the same state.  Subprocesses of ``.venv/bin/phrt``
+on the showcase with a keyframed camera (64x48, 4 frames, two budgets, two variants), then the
+executor's order on a plan whose jobs are stand-ins (no rendering)."""
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="phrt-user-"))
+
+import bpy  # noqa: E402,F401  (Blender first: the modules below import it)
+import pytest  # noqa: E402
+
+import phrt  # noqa: E402
+from phrt.cli import lockstep  # noqa: E402
+from phrt.phrt_addon.runs import plan as plan_module  # noqa: E402
+from phrt.phrt_addon.runs import run_files  # noqa: E402
+from phrt_render import save_moving_showcase  # noqa: E402
+
+PHRT = Path(sys.executable).with_name("phrt")
+SWEEP = ["--frames", "1-4", "--budget-at", "0.25,0.75", "--variants", "measured,benefit", "--resolution", "64x48",
+         "--oracle-every", "2", "--lockstep", "--out", "sw"]
+HYBRIDS = [f"showcase-Camera-hybrid-at{fraction}-{variant}" for fraction in ("0.25", "0.75")
+           for variant in ("measured", "benefit")]
+
+
+def run_phrt(args, cwd):
+    process = subprocess.run([str(PHRT), *args], cwd=cwd, capture_output=True, text=True, timeout=900)
+    errors = [line for line in process.stderr.splitlines() if line.strip() and "EGL" not in line]
+    return process.returncode, process.stdout, errors
+
+
+def progress(stdout):
+    """{job id: the rest of its progress line}."""
+    found = {}
+    for line in stdout.splitlines():
+        if line.startswith("phrt: [") and "] " in line:
+            job, rest = line.split("] ", 1)[1].split(": ", 1)
+            found[job] = rest
+    return found
+
+
+@pytest.fixture(scope="module")
+def sweeps(tmp_path_factory):
+    """(folder, first run of the sweep, the same command again, once more after a hybrid run was removed)."""
+    if not hasattr(bpy.types.Scene, "phrt"):
+        phrt.register()
+    blend = save_moving_showcase(tmp_path_factory.mktemp("lockstep") / "showcase.blend", 64, 48)
+    folder = blend.parent
+    first = run_phrt(["sweep", str(blend), *SWEEP], folder)
+    # The frames of the hybrid runs in the order they were written, before a run is redone below.
+    written = sorted((path.stat().st_mtime_ns, int(path.stem)) for run in HYBRIDS
+                     for path in (folder / "sw" / run / "frames").glob("*.exr"))
+    first = first + ([frame for _, frame in written],)
+    second = run_phrt(["sweep", str(blend), *SWEEP], folder)
+    shutil.rmtree(folder / "sw" / HYBRIDS[1])
+    third = run_phrt(["sweep", str(blend), *SWEEP], folder)
+    return folder / "sw", first, second, third
+
+
+def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
+    folder, (status, stdout, errors, written), _, _ = sweeps
+    assert status == 0, errors
+    lines = progress(stdout)
+    assert set(lines) == {"showcase-Camera-raster", "showcase-Camera-raytrace", *HYBRIDS, "oracle"}
+    for run in HYBRIDS:
+        assert lines[run].startswith("done") and "4 frames in lockstep with 3 other runs" in lines[run], lines[run]
+        summary = run_files.read_summary(folder / run)
+        assert summary["frame_count"] == 4 and summary["budget_source"]["method"] == "runs"
+    # Every run wrote frame f before any wrote frame f + 1: the images in the order they were written
+    # go 1, 1, 1, 1, 2, 2... (one run after the other would go 1, 2, 3, 4, 1, 2...).
+    assert written == [frame for frame in range(1, 5) for _ in HYBRIDS]
+    assert not list(folder.glob(".*partial*"))
+    with open(folder / "report" / "sweep.csv", newline="") as handle:
+        rows = {row["run"]: row for row in csv.DictReader(handle)}
+    for run in HYBRIDS:  # the drift against the raster run is reported, and the oracle judged each run
+        assert float(rows[run]["speed_vs_raster"]) > 0 and int(rows[run]["judged_frames"]) == 2, rows[run]
+
+
+def test_a_lockstep_sweep_run_again_skips_complete_runs_and_redoes_a_missing_one(sweeps):
+    folder, _, (status, stdout, errors), (status_3, stdout_3, errors_3) = sweeps
+    assert status == 0, errors
+    assert {line.split()[0] for line in progress(stdout).values()} == {"skipped"}
+    assert status_3 == 0, errors_3
+    done = {job for job, line in progress(stdout_3).items() if line.startswith("done")}
+    assert done == {HYBRIDS[1], "oracle"}  # alone in its group: the complete runs stay as they are
+    assert "4 frames in lockstep with 0 other runs" in progress(stdout_3)[HYBRIDS[1]]
+    assert run_files.read_summary(folder / HYBRIDS[1])["frame_count"] == 4
+
+
+def test_lockstep_with_workers_exits_2_with_one_line(tmp_path):
+    status, _, errors = run_phrt(["sweep", "atrium", "--lockstep", "--workers", "2", "--out", "x"], tmp_path)
+    assert status == 2 and len(errors) == 1 and "--lockstep" in errors[0] and "--workers" in errors[0]
+    assert not (tmp_path / "x").exists()
+
+
+def plan_of(targets=("path1",)):
+    jobs = []
+    for path in targets:
+        raster, raytrace = f"s-{path}-raster", f"s-{path}-raytrace"
+        jobs += [plan_module.Job(raster, "run", mode="RASTER", path=path),
+                 plan_module.Job(raytrace, "run", mode="RAYTRACE", path=path)]
+        jobs += [plan_module.Job(f"s-{path}-hybrid-{index}", "run", mode="HYBRID", budget_at=0.5, path=path,
+                                 depends_on=[raster, raytrace]) for index in range(3)]
+    hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
+    jobs.append(plan_module.Job("oracle", "oracle", depends_on=[job.id for job in jobs]))
+    return plan_module.Plan(scene="s", scene_label="s", path=targets[0], frames=[1, 2], resolution=[8, 8],
+                            budgets=[0.5], oracle_every=2, jobs=jobs), hybrids
+
+
+def test_the_executor_runs_each_paths_hybrid_runs_as_one_group_after_their_references():
+    plan, hybrids = plan_of(("path1", "path2"))
+    calls = []
+
+    def execute(_, job_id):
+        calls.append(job_id)
+        return plan_module.JobOutcome(job_id, "done")
+
+    def group(_, job_ids):
+        calls.append(tuple(job_ids))
+        return [plan_module.JobOutcome(job_id, "done") for job_id in job_ids]
+
+    seen = []
+    outcomes = lockstep.LockstepExecutor(group).run("plan.json", plan, execute, on_outcome=seen.append)
+    assert calls == ["s-path1-raster", "s-path1-raytrace", tuple(hybrids[:3]),
+                     "s-path2-raster", "s-path2-raytrace", tuple(hybrids[3:]), "oracle"]
+    assert [outcome.job_id for outcome in outcomes] == [outcome.job_id for outcome in seen]
+    assert sorted(outcome.job_id for outcome in outcomes) == sorted(job.id for job in plan.jobs)
+
+
+def test_a_failed_reference_or_group_fails_its_runs_and_the_rest_goes_on():
+    plan, hybrids = plan_of(("path1", "path2"))
+
+    def execute(_, job_id):
+        return plan_module.JobOutcome(job_id, "failed" if job_id == "s-path1-raytrace" else "done", message="x")
+
+    def group(_, job_ids):
+        raise RuntimeError("the GPU went away")
+
+    outcomes = {outcome.job_id: outcome for outcome in lockstep.LockstepExecutor(group).run("p", plan, execute)}
+    assert all(outcomes[run].status == "failed" and "s-path1-raytrace failed" in outcomes[run].message
+               for run in hybrids[:3])
+    assert all(outcomes[run].status == "failed" and "the GPU went away" in outcomes[run].message
+               for run in hybrids[3:])
+    assert outcomes["s-path2-raster"].status == "done" and outcomes["oracle"].status == "failed"
