@@ -231,6 +231,9 @@ def _sweep_fractions(args):
 
 
 def command_sweep(args):
+    if args.lockstep and (args.workers is not None or args.scheduler is not None):
+        raise UserError("--lockstep renders the hybrid runs together in this process: not with --workers or "
+                        "--scheduler")
     from ..phrt_addon.report import oracle as oracle_module
     from ..phrt_addon.runs import plan as plan_module
     from . import cluster
@@ -260,9 +263,6 @@ def command_sweep(args):
                                       selection=args.selection)
     except plan_module.PlanError as error:
         raise UserError(str(error)) from None
-    if args.lockstep and (args.workers is not None or args.scheduler is not None):
-        raise UserError("--lockstep renders the hybrid runs together in this process: not with --workers or "
-                        "--scheduler")
     if args.lockstep:
         from .lockstep import LockstepExecutor
         executor = LockstepExecutor()

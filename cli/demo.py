@@ -8,7 +8,8 @@
    scene's ``path1`` (``phrt sweep``: raster, raytrace, then hybrid at 3 budgets
    between them in the variants of :data:`DEMO_VARIANTS` this checkout has,
    and the oracle on every 4th frame: 12 judged frames per run, enough for a
-   captured share's interval to mean something), each run a
+   captured share's interval to mean something; the hybrid runs in lockstep, frame
+   by frame together, so that the variants meet the machine in the same state), each run a
    docs/formats.md run directory under ``out/demo/``, and the report
    (section 5, with the error-time curve, Table II, regret and popping) in
    ``out/demo/report/``.
@@ -88,7 +89,7 @@ def main(argv=None):
     variants = ",".join(name for name in DEMO_VARIANTS if name in plan.VARIANTS)
     status = cli.main(["sweep", args.scene, "--path", args.path, "--frames", args.frames, "--budgets",
                        str(args.budgets), "--resolution", args.resolution, "--out", str(out),
-                       "--variants", variants, "--oracle-every", str(DEMO_ORACLE_EVERY)])
+                       "--variants", variants, "--oracle-every", str(DEMO_ORACLE_EVERY), "--lockstep"])
     print(f"report: {out / 'report' / 'report.md'}  {out / 'report' / 'report.html'}")
     print(f"demo finished in {time.perf_counter() - started:.0f} s")
     return status

@@ -7,14 +7,18 @@ run and the three runs after it, and 40-46 ms in the six runs after those, so a 
 the other meet different machines, and the difference between two variants is then mostly the
 hour's.  Here every hybrid run of a path (each budget and each selection variant) renders frame f
 before any of them renders frame f + 1, each frame starting with the next run in turn: they meet
-the machine in the same state, within a second of each other.
+the machine in the same state, within one round of the group of each other (a few seconds for 9
+runs at 320x240).  A run that fails (an error in a frame, its render stopped) fails alone; the
+others go on.
 
 Each run is the very replay ``phrt sweep`` makes otherwise (``ReplayRun`` with the job's arguments,
 its own frame renderer, cost model and logs, its folder written under a temporary name and
 published when complete); what they share is the scene and the GPU's static geometry (uploaded
 once for all of them).  The raster and raytrace runs (where a budget at F finds its milliseconds)
 run before, the oracle after, as in a plain sweep; ``speed_vs_raster`` in ``sweep.csv`` says how
-far the machine drifted between the raster run and the hybrid runs, the same for all of them.
+far the machine drifted between the raster run and the hybrid runs, the same for all of them, and
+``summary.json``'s ``lockstep_runs`` (``sweep.csv``'s column of that name) how many runs a run was
+rendered together with (absent: one after the other; a run redone alone later has 1).
 """
 from __future__ import annotations
 
@@ -32,90 +36,142 @@ from ..phrt_addon.runs import plan as plan_module
 
 def execute_group(plan_path, job_ids) -> list:
     """Run the hybrid run jobs ``job_ids`` (one path of the plan at ``plan_path``) in lockstep;
-    complete ones are skipped.  One outcome per job.  Bad input fails every job of the group with
-    its one-line message; a signal stops the group between frames (``SweepInterrupted``, nothing of
-    it kept); anything else raises (the caller records it)."""
+    complete ones are skipped.  One outcome per job: a run that fails (bad input, an error in one
+    of its frames, its render stopped) fails alone, the others go on and are published.  A signal
+    stops the group between frames (``SweepInterrupted``, nothing of it kept)."""
     plan_path = Path(plan_path)
     folder = plan_path.parent
     begin = time.perf_counter()
     plan = plan_module.read_plan(plan_path)
     jobs = [plan.job(plan_module.check_job_id(job_id)) for job_id in job_ids]
-    targets = {plan.target(job) for job in jobs}
-    if len(targets) > 1 or any(job.kind != "run" or job.mode != "HYBRID" for job in jobs):
+    if len({plan.target(job) for job in jobs}) > 1 or any(job.kind != "run" or job.mode != "HYBRID" for job in jobs):
         raise ValueError("a lockstep group is the hybrid runs of one path")
-    outcomes, todo = [], []
+    outcomes, todo = {}, []
     try:
         for job in jobs:
             redo = redo_reason(plan, folder, job)
             if redo is None:
-                outcomes.append(plan_module.JobOutcome(job.id, "skipped", message="complete"))
+                outcomes[job.id] = plan_module.JobOutcome(job.id, "skipped", message="complete")
             else:
                 todo.append((job, redo))
-        if not todo:
-            return outcomes
         for job, _ in todo:
             clear_dead_attempts(folder, job)
-        scene, camera = open_scene(plan, todo[0][0])
-        partials = [plan_module.partial_dir(folder, job) for job, _ in todo]
-        try:
-            with blender_process.quiet_stdout():
-                results = _lockstep(plan, folder, [job for job, _ in todo], scene, camera, partials)
-            for (job, _), partial in zip(todo, partials):
-                plan_module.publish(partial, folder / job.id)
-        except BaseException:
-            for partial in partials:
-                shutil.rmtree(partial, ignore_errors=True)
-            raise
+        scene, camera = open_scene(plan, todo[0][0]) if todo else (None, None)
     except (blender_process.UserError, camera_path.ReplayError, plan_module.PlanError) as error:
         message = str(error).strip().splitlines()[0]
-        return outcomes + [plan_module.JobOutcome(job.id, "failed", time.perf_counter() - begin, message)
-                           for job, _ in todo]
-    seconds = (time.perf_counter() - begin) / len(todo)  # the group's time, shared
-    for (job, redo), result in zip(todo, results):
-        message = f"{result.frames_done} frames in lockstep with {len(todo) - 1} other runs, " \
-                  f"mean {result.summary['total_ms']['mean']:.0f} ms"
-        if job.budget_at is not None:
-            message += f", budget {result.summary['budget_ms']:.0f} ms"
-        if redo != "no run yet":
-            message = f"redone: {redo}; {message}"
-        outcomes.append(plan_module.JobOutcome(job.id, "done", seconds, message))
-    return outcomes
+        return [outcomes.get(job.id) or plan_module.JobOutcome(job.id, "failed", time.perf_counter() - begin, message)
+                for job in jobs]
+    if todo:
+        with blender_process.quiet_stdout():
+            results = _lockstep(plan, folder, [job for job, _ in todo], scene, camera)
+        seconds = (time.perf_counter() - begin) / len(todo)  # the group's time, shared
+        for (job, redo), (result, failure) in zip(todo, results):
+            partial = plan_module.partial_dir(folder, job)
+            if failure is not None:
+                shutil.rmtree(partial, ignore_errors=True)
+                outcomes[job.id] = plan_module.JobOutcome(job.id, "failed", seconds, failure)
+                continue
+            plan_module.publish(partial, folder / job.id)
+            message = f"{result.frames_done} frames in lockstep with {len(todo) - 1} other runs, " \
+                      f"mean {result.summary['total_ms']['mean']:.0f} ms"
+            if job.budget_at is not None:
+                message += f", budget {result.summary['budget_ms']:.0f} ms"
+            if redo != "no run yet":
+                message = f"redone: {redo}; {message}"
+            outcomes[job.id] = plan_module.JobOutcome(job.id, "done", seconds, message)
+    return [outcomes[job.id] for job in jobs]
 
 
-def _lockstep(plan, folder, jobs, scene, camera, partials) -> list:
-    """Open a ``ReplayRun`` per job, render frame after frame, each frame every run (starting with
-    the next run each frame), then finish them; returns their ``ReplayResult``s."""
-    frames = (plan.frames[0], plan.frames[1])
-    runs = []
-    engine_session = session.current()
-    try:
-        for job, partial in zip(jobs, partials):
-            runs.append(replay.ReplayRun(scene, camera, frames, job.mode, partial, **run_arguments(plan, folder, job)))
-        received = []
-        with stop_on_signals(received):
-            index = 0
-            while runs[0].remaining and not received:
-                for offset in range(len(runs)):
-                    run = runs[(index + offset) % len(runs)]
-                    engine_session.replay = run.state  # the frame renderer this render uses
-                    try:
-                        run.step()
-                    except replay.ReplayInterrupted:
-                        received.append("SIGINT")  # Esc or a stopped render: the group stops
-                    if received:
-                        break
-                index += 1
-        if received:
-            raise SweepInterrupted(received[0], jobs[0].id, runs[0].done)
-    except BaseException:
-        for run in reversed(runs):  # the last opened first: each restores what the one before it saw
+def step_in_lockstep(runs, before_step=None, stopped=lambda: False) -> dict:
+    """Step ``runs`` (objects with ``remaining`` and ``step()``) frame by frame together: each round,
+    every run still going renders its next frame, the round starting with the next run in turn (no
+    run is always first or last).  A run whose step raises is left out from then on; the others go
+    on.  ``before_step(run)`` runs before each step; ``stopped()`` is polled before each step (a
+    signal: the caller stops the group).  Returns {index of a failed run: its exception}."""
+    failed = {}
+    count = len(runs)
+    round_index = 0
+    while not stopped():
+        going = [index for index, run in enumerate(runs) if index not in failed and run.remaining]
+        if not going:
+            break
+        for index in sorted(going, key=lambda index: (index - round_index) % count):
+            if stopped():
+                return failed
+            if before_step is not None:
+                before_step(runs[index])
             try:
-                run.finish(cancelled=True)
-            except ValueError:
-                pass  # a run whose step failed closed itself
+                runs[index].step()
+            except Exception as error:  # this run fails alone
+                failed[index] = error
+        round_index += 1
+    return failed
+
+
+def _failure(run, error) -> str:
+    if isinstance(error, replay.ReplayInterrupted):
+        return f"stopped while rendering: {run.done} frames done"
+    return f"{type(error).__name__}: {str(error).strip().splitlines()[0] if str(error).strip() else ''}".rstrip(": ")
+
+
+def _lockstep(plan, folder, jobs, scene, camera) -> list:
+    """Open a ``ReplayRun`` per job (at its partial folder), step them in lockstep, finish them;
+    returns per job (``ReplayResult``, None) or (None, the one-line reason it failed).  The scene is
+    restored once, at the end, as the first run found it."""
+    frames = (plan.frames[0], plan.frames[1])
+    engine_session = session.current()
+    runs, opened, results = [], [], [None] * len(jobs)
+    try:
+        for index, job in enumerate(jobs):
+            try:
+                runs.append(replay.ReplayRun(scene, camera, frames, job.mode, plan_module.partial_dir(folder, job),
+                                             restores_scene=False, facts={"lockstep_runs": len(jobs)},
+                                             **run_arguments(plan, folder, job)))
+                opened.append(index)
+            except (camera_path.ReplayError, blender_process.UserError) as error:
+                results[index] = (None, str(error).strip().splitlines()[0])
+        received = []
+
+        def switch(run):
+            engine_session.replay = run.state  # the frame renderer this render uses
+
+        with stop_on_signals(received):
+            failed = step_in_lockstep(runs, switch, lambda: bool(received))
+        if received:
+            raise SweepInterrupted(received[0], jobs[opened[0]].id if opened else jobs[0].id,
+                                   min((run.done for run in runs), default=0))
+        # Finished in reverse order: numpy's BLAS threads come back as the first run found them.
+        for position in reversed(range(len(runs))):
+            run, index = runs[position], opened[position]
+            if position in failed:
+                results[index] = (None, _failure(run, failed[position]))
+                _close(run)  # a stopped render leaves its run open; a failed step closed it
+                continue
+            try:
+                results[index] = (run.finish(), None)
+            except Exception as error:  # summary.json could not be written (a full disk)
+                results[index] = (None, _failure(run, error))
+                _close(run)
+        return results
+    except BaseException:
+        for run in reversed(runs):
+            _close(run)
+        for job in jobs:
+            shutil.rmtree(plan_module.partial_dir(folder, job), ignore_errors=True)
         raise
-    # Finished in reverse order: the scene and numpy's BLAS threads come back as the first found them.
-    return list(reversed([run.finish() for run in reversed(runs)]))
+    finally:
+        engine_session.replay = None
+        if runs:
+            runs[0].restore_scene()
+
+
+def _close(run):
+    """Close ``run`` if it is still open (its lock, renderer and GPU objects released), whatever
+    else fails."""
+    try:
+        run.finish(cancelled=True)
+    except Exception:  # already closed by its failed step, or summary.json unwritable: it is dropped
+        pass
 
 
 class LockstepExecutor:
@@ -159,6 +215,9 @@ class LockstepExecutor:
                                                       f"{type(error).__name__}: {error}") for other in group]
                 for outcome in results:
                     record(outcome)
+                for other in group:  # a group that said nothing of a run failed it
+                    if other.id not in handled:
+                        record(plan_module.JobOutcome(other.id, "failed", message="no outcome from its lockstep group"))
                 continue
             begin = time.perf_counter()
             try:

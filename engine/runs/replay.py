@@ -113,13 +113,16 @@ class ReplayRun:
     ``run.finish(cancelled=...)`` writes ``summary.json`` and restores the scene.
     An exception in ``step()`` restores the scene and leaves the complete rows
     written so far (like ``replay()``); ``ReplayInterrupted`` (the render itself was
-    stopped) leaves the run open for ``finish(cancelled=True)``."""
+    stopped) leaves the run open for ``finish(cancelled=True)``.  ``restores_scene=False``: neither
+    does (several runs open on one scene at once restore it once, ``restore_scene()``); ``facts``:
+    more entries of ``summary.json``."""
 
     def __init__(self, scene, camera, frame_range, mode, run_dir, *, images="exr", budget_ms=None,
                  resolution=None, scene_label=None, budget_at=None, budget_search_dirs=None,
-                 overrides=None, frame_list=None, overwrite=False):
+                 overrides=None, frame_list=None, overwrite=False, restores_scene=True, facts=None):
         check_input(mode=mode, images=images, budget_ms=budget_ms, budget_at=budget_at, frame_range=frame_range)
         mode = mode.upper()
+        self.restores_scene = bool(restores_scene)
         start, end = frame_range
         requested_budget_ms = budget_ms
         settings = extract.read_settings(scene)
@@ -187,7 +190,7 @@ class ReplayRun:
             "selection": str(self.settings.selection).lower(),
             "quality_tiers": bool(getattr(self.settings, "quality_tiers", False)),
             "budget_at": fraction if mode == "HYBRID" and budget_source is not None else None,
-            "budget_source": budget_source, "work": self._work, **versions()}
+            "budget_source": budget_source, "work": self._work, **versions(), **(facts or {})}
         try:
             self.log = run_log.RunLog(self.run_dir, extra_frame_columns=EXTRA_FRAME_COLUMNS,
                                      facts={**self._summary, "mode": mode, "budget_ms": self.settings.budget_ms,
@@ -283,9 +286,13 @@ class ReplayRun:
         summary = {**self._run_facts(), "cancelled": False, "partial": True,
                    "error": str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__}
         try:
-            self._close(summary=summary)
+            self._close(summary=summary, restore_scene=self.restores_scene)
         except OSError:
             self._open = False
+
+    def restore_scene(self):
+        """Put back the scene settings this run found (camera, frame, output, resolution, engine)."""
+        self._restore()
 
     def finish(self, cancelled=False, restore_scene=True) -> ReplayResult:
         """Write ``summary.json`` (``cancelled`` says whether frames were left out) and restore
@@ -295,7 +302,7 @@ class ReplayRun:
         cancelled = bool(cancelled and self.remaining)
         problems = self.problem_lines()
         written = self._close(summary={**self._run_facts(), "cancelled": cancelled, "partial": bool(self.remaining)},
-                              restore_scene=restore_scene)
+                              restore_scene=restore_scene and self.restores_scene)
         return ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
                             cancelled=cancelled, summary=written, problems=problems)
 

@@ -147,7 +147,8 @@ def sweep_rows(runs, errors, regrets, pops, references):
     for run in runs:
         outcome = errors[id(run)]
         raster = next((other for other in runs if other.mode == "RASTER" and other.scene == run.scene
-                       and other.path == run.path), None)
+                       and other.path == run.path and all(other.summary.get(key) == run.summary.get(key)
+                                                          for key in ("resolution", "frame_range"))), None)
         regret = regrets.get(id(run))
         pop = pops.get(id(run))
         hybrid = run.mode == "HYBRID"
@@ -180,6 +181,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
             "speed_vs_raster": steady.speed_against(run.frames, raster.frames)
             if raster is not None and raster is not run else None,
             "time_left_share": regret.time_left_share if regret is not None else None,
+            "lockstep_runs": run.summary.get("lockstep_runs"),
         })
     return rows
 

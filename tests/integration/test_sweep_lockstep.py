@@ -73,6 +73,7 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
         assert lines[run].startswith("done") and "4 frames in lockstep with 3 other runs" in lines[run], lines[run]
         summary = run_files.read_summary(folder / run)
         assert summary["frame_count"] == 4 and summary["budget_source"]["method"] == "runs"
+        assert summary["lockstep_runs"] == 4
     # Every run wrote frame f before any wrote frame f + 1: the images in the order they were written
     # go 1, 1, 1, 1, 2, 2... (one run after the other would go 1, 2, 3, 4, 1, 2...).
     assert written == [frame for frame in range(1, 5) for _ in HYBRIDS]
@@ -81,6 +82,8 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
         rows = {row["run"]: row for row in csv.DictReader(handle)}
     for run in HYBRIDS:  # the drift against the raster run is reported, and the oracle judged each run
         assert float(rows[run]["speed_vs_raster"]) > 0 and int(rows[run]["judged_frames"]) == 2, rows[run]
+        assert rows[run]["lockstep_runs"] == "4"
+    assert rows["showcase-Camera-raster"]["lockstep_runs"] == ""
 
 
 def test_a_lockstep_sweep_run_again_skips_complete_runs_and_redoes_a_missing_one(sweeps):
@@ -92,6 +95,7 @@ def test_a_lockstep_sweep_run_again_skips_complete_runs_and_redoes_a_missing_one
     assert done == {HYBRIDS[1], "oracle"}  # alone in its group: the complete runs stay as they are
     assert "4 frames in lockstep with 0 other runs" in progress(stdout_3)[HYBRIDS[1]]
     assert run_files.read_summary(folder / HYBRIDS[1])["frame_count"] == 4
+    assert run_files.read_summary(folder / HYBRIDS[1])["lockstep_runs"] == 1  # said, not hidden
 
 
 def test_lockstep_with_workers_exits_2_with_one_line(tmp_path):
@@ -149,3 +153,41 @@ def test_a_failed_reference_or_group_fails_its_runs_and_the_rest_goes_on():
     assert all(outcomes[run].status == "failed" and "the GPU went away" in outcomes[run].message
                for run in hybrids[3:])
     assert outcomes["s-path2-raster"].status == "done" and outcomes["oracle"].status == "failed"
+
+
+class StubRun:
+    """A run of ``frames`` frames whose steps are logged; ``fail_at``: the frame whose step raises."""
+
+    def __init__(self, name, frames, log, fail_at=None):
+        self.name, self.remaining, self.log, self.fail_at, self.done = name, frames, log, fail_at, 0
+
+    def step(self):
+        frame = self.done + 1
+        if frame == self.fail_at:
+            raise RuntimeError(f"{self.name} broke at frame {frame}")
+        self.log.append((self.name, frame))
+        self.done, self.remaining = frame, self.remaining - 1
+
+
+def test_lockstep_renders_each_frame_of_every_run_before_the_next_starting_with_the_next_run():
+    log, switched = [], []
+    runs = [StubRun(name, 3, log) for name in "abc"]
+    assert lockstep.step_in_lockstep(runs, before_step=lambda run: switched.append(run.name)) == {}
+    assert log == [("a", 1), ("b", 1), ("c", 1), ("b", 2), ("c", 2), ("a", 2), ("c", 3), ("a", 3), ("b", 3)]
+    assert switched == [name for name, _ in log]  # each step's renderer switched in before it
+
+
+def test_a_run_that_fails_is_left_out_and_the_others_finish():
+    log = []
+    runs = [StubRun("a", 3, log), StubRun("b", 3, log, fail_at=2), StubRun("c", 3, log)]
+    failed = lockstep.step_in_lockstep(runs)
+    assert list(failed) == [1] and "broke at frame 2" in str(failed[1])
+    assert [frame for name, frame in log if name == "a"] == [1, 2, 3] == [frame for name, frame in log if name == "c"]
+    assert ("b", 2) not in log and ("b", 3) not in log
+
+
+def test_a_signal_stops_the_group_between_two_steps():
+    log = []
+    runs = [StubRun(name, 5, log) for name in "ab"]
+    lockstep.step_in_lockstep(runs, stopped=lambda: len(log) >= 3)
+    assert log == [("a", 1), ("b", 1), ("b", 2)]
