@@ -121,10 +121,62 @@ def evaluate(args) -> list:
             if row["mode"] != "HYBRID":
                 continue
             floor = (raster_p95 / float(row["budget_ms"])) if raster_p95 and row.get("budget_ms") else ""
-            table.append({"path": target, "variant": row.get("variant_name") or row["variant"],
+            table.append({"path": target, "variant": row.get("variant_name") or row["variant"], "run": row["run"],
                           **{key: row.get(key, "") for key in COLUMNS[2:]}, "raster_p95_over_budget": floor,
                           "max_flips_10": _max_flips(sweep_dir / row["run"])})
     return table
+
+
+PAIRS = (("benefit", "measured"), ("tiers", "benefit"))
+PAIRED_COLUMNS = ("path", "budget_at", "first", "second", "difference", "difference_lo", "difference_hi",
+                  "judged_frames", "verdict")
+
+
+def paired(table, out: Path) -> list:
+    """Per path and budget, each of :data:`PAIRS` present: the captured share of the first variant
+    less the second's on the same judged frames, with the paired block-bootstrap interval
+    (``report.captured.paired_difference``); the verdict says a difference only when the interval
+    leaves out 0."""
+    from phrt.phrt_addon.report import captured
+    from phrt.phrt_addon.report import oracle
+    rows = []
+    for path in dict.fromkeys(row["path"] for row in table):
+        results = oracle.read_results(out / path.replace("/", "-") / oracle.ORACLE_DIR)
+        if results is None:
+            continue
+        runs = {(row["variant"], row["budget_at"]): row["run"] for row in table if row["path"] == path}
+        for budget in dict.fromkeys(budget for _, budget in runs):
+            for first, second in PAIRS:
+                if (first, budget) not in runs or (second, budget) not in runs:
+                    continue
+                a = {row["frame"]: row for row in results.rows_of(runs[first, budget])}
+                b = {row["frame"]: row for row in results.rows_of(runs[second, budget])}
+                frames = sorted(set(a) & set(b))
+                difference, low, high = captured.paired_difference(
+                    [a[f]["raster_flip"] for f in frames], [a[f]["heuristic_flip"] for f in frames],
+                    [b[f]["heuristic_flip"] for f in frames], [a[f]["oracle_flip"] for f in frames])
+                if low is None:
+                    verdict = "not judged" if difference is None else captured.NO_DIFFERENCE
+                elif low > 0 or high < 0:
+                    verdict = f"{first if difference > 0 else second} captures more"
+                else:
+                    verdict = captured.NO_DIFFERENCE
+                rows.append({"path": path, "budget_at": budget, "first": first, "second": second,
+                             "difference": difference, "difference_lo": low, "difference_hi": high,
+                             "judged_frames": len(frames), "verdict": verdict})
+    return rows
+
+
+def paired_markdown(rows) -> str:
+    lines = ["| Path | Budget at | Variants | Captured, first - second [90%, paired] | Judged | Verdict |",
+             "|---|---|---|---|---|---|"]
+    for row in rows:
+        interval = "" if row["difference_lo"] is None else \
+            f" [{row['difference_lo']:+.2f}, {row['difference_hi']:+.2f}]"
+        value = "–" if row["difference"] is None else f"{row['difference']:+.2f}"
+        lines.append(f"| {row['path']} | {_number(row['budget_at'], '.2f')} | {row['first']} - {row['second']} | "
+                     f"{value}{interval} | {row['judged_frames']} | {row['verdict']} |")
+    return "\n".join(lines) + "\n"
 
 
 def _max_flips(run_dir: Path):
@@ -183,13 +235,15 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return stop.status
     write_table(Path(args.out), "selection_eval", COLUMNS, table, markdown(table))
+    pairs = paired(table, Path(args.out))
+    write_table(Path(args.out), "selection_eval_paired", PAIRED_COLUMNS, pairs, paired_markdown(pairs))
     return 0
 
 
 def write_table(out: Path, stem: str, columns, rows, text: str) -> None:
     """``OUT/<stem>.csv`` (``columns``, one row per dict) and ``OUT/<stem>.md`` (``text``), printed."""
     with open(out / f"{stem}.csv", "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=columns, lineterminator="\n")
+        writer = csv.DictWriter(handle, fieldnames=columns, lineterminator="\n", extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
     (out / f"{stem}.md").write_text(text, encoding="utf-8")

@@ -58,11 +58,21 @@ def block_bootstrap(raster, run, oracle, *, confidence: float = CONFIDENCE, resa
     frames (percentile intervals covered 79-84% at 12-48 frames on the synthetic paths of
     tests/core/test_captured.py, this one 84-87%).  (None, None) with fewer than 2 frames or no gain."""
     raster, run, oracle = (np.asarray(values, dtype=np.float64) for values in (raster, run, oracle))
-    count = raster.size
-    share = captured_share(raster, run, oracle) if count >= 2 else None
-    if share is None:
+    return ratio_interval(raster - run, raster - oracle, confidence=confidence, resamples=resamples, block=block,
+                          seed=seed)
+
+
+def ratio_interval(gained, possible, *, confidence: float = CONFIDENCE, resamples: int = RESAMPLES,
+                   block: int | None = None, seed: int = 0) -> tuple[float | None, float | None]:
+    """(low, high): the studentized moving-block bootstrap interval of sum(gained) / sum(possible)
+    over frames (:func:`block_bootstrap`'s, for any per-frame numerator); (None, None) with fewer
+    than 2 frames or sum(possible) <= MIN_GAIN."""
+    gained, possible = np.asarray(gained, dtype=np.float64), np.asarray(possible, dtype=np.float64)
+    count = gained.size
+    total = float(np.sum(possible))
+    if count < 2 or not math.isfinite(total) or total <= MIN_GAIN:
         return None, None
-    gained, possible = raster - run, raster - oracle
+    share = float(np.sum(gained)) / total
     block = min(block or block_length(count), count)
     blocks = -(-count // block)
     own = (np.arange(blocks * block) % count).reshape(1, blocks, block)
@@ -119,6 +129,21 @@ def measure(raster, run, oracle, **options) -> Captured:
     regret = run - oracle
     return Captured(share=captured_share(raster, run, oracle), low=low, high=high, judged_frames=int(raster.size),
                     min_regret=float(regret.min()), beat_oracle=int(np.count_nonzero(regret < 0)))
+
+
+def paired_difference(raster, run_a, run_b, oracle, **options) -> tuple:
+    """(captured of a - captured of b, low, high) on the same judged frames of one budget (the same
+    oracle): sum(run_b - run_a) / sum(raster - oracle), its interval from the same block bootstrap
+    with both runs' frames resampled together.  Frame-to-frame differences of the scene (how much
+    any selection can gain on a frame) cancel, so the interval is far narrower than either run's
+    own; with runs rendered in lockstep (``phrt sweep --lockstep``) the machine's state is paired
+    too.  (None, None, None) when the oracle gains nothing."""
+    raster, run_a, run_b, oracle = (np.asarray(values, dtype=np.float64) for values in (raster, run_a, run_b, oracle))
+    gain = float(np.sum(raster - oracle))
+    if raster.size == 0 or not math.isfinite(gain) or gain <= MIN_GAIN:
+        return None, None, None
+    low, high = ratio_interval(run_b - run_a, raster - oracle, **options)
+    return float(np.sum(run_b - run_a)) / gain, low, high
 
 
 def overlap(first, second) -> bool:

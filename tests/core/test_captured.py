@@ -69,3 +69,29 @@ def test_verdict_says_no_difference_when_intervals_overlap():
     c = captured.Captured(share=0.90, low=0.82, high=0.97, judged_frames=12)
     assert captured.verdict("measured", a, "benefit", c) == "benefit captures more"
     assert captured.verdict("measured", a, "none", captured.Captured()) == captured.NO_DIFFERENCE
+
+
+def test_the_paired_difference_tells_apart_what_two_overlapping_intervals_cannot():
+    generator = np.random.default_rng(3)
+    frames = 48
+    # Frames differ a lot in what the oracle can gain (a mirror in view or not) and in what any
+    # selection gets of it (both runs miss the same hard frames); run a gets 15% more than run b,
+    # each with a little noise of its own.
+    possible = generator.gamma(0.6, 0.004, frames)
+    raster = 0.02 + possible
+    oracle = raster - possible
+    shared = generator.normal(0, 0.4, frames)
+    run_a = raster - possible * (0.60 + shared + generator.normal(0, 0.05, frames))
+    run_b = raster - possible * (0.45 + shared + generator.normal(0, 0.05, frames))
+    a, b = captured.measure(raster, run_a, oracle), captured.measure(raster, run_b, oracle)
+    difference, low, high = captured.paired_difference(raster, run_a, run_b, oracle)
+    assert difference == pytest.approx(a.share - b.share)
+    assert captured.overlap(a.interval, b.interval)  # one run's interval each: "no difference"
+    assert 0.0 < low < difference < high and high - low < min(a.high - a.low, b.high - b.low)
+
+
+def test_a_run_paired_with_itself_differs_by_nothing_and_no_gain_gives_none():
+    raster, oracle = np.full(10, 0.03), np.full(10, 0.02)
+    run = np.linspace(0.021, 0.029, 10)
+    assert captured.paired_difference(raster, run, run, oracle) == (0.0, 0.0, 0.0)
+    assert captured.paired_difference(raster, run, run, raster) == (None, None, None)

@@ -32,3 +32,30 @@ def test_one_after_another_runs_the_plain_sweep(monkeypatch, tmp_path):
                          "--one-after-another"])
     assert calls and "--lockstep" not in calls[0]
     sys.modules.pop("selection_eval", None)
+
+
+def test_the_paired_table_compares_variants_on_the_same_judged_frames(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(TOOLS))
+    import numpy as np
+    import selection_eval
+    from phrt.phrt_addon.report import oracle
+    frames = list(range(4, 84, 4))
+    generator = np.random.default_rng(1)
+    gain = generator.gamma(0.8, 0.004, len(frames))
+    runs = {"benefit": "p-hybrid-at0.50-benefit", "measured": "p-hybrid-at0.50-measured"}
+    shares = {"benefit": 0.7, "measured": 0.4}
+    rows, candidates = [], []
+    for frame, possible in zip(frames, gain):
+        item = oracle.FrameCandidates(frame=frame, names=["Mirror"], cost_ms=np.array([3.0]),
+                                      benefit=np.array([possible]), flip_raster=0.02 + possible)
+        candidates.append(item)
+        for variant, run in runs.items():
+            run_flip = 0.02 + possible * (1 - shares[variant] + generator.normal(0, 0.02))
+            rows.append(oracle.regret_row(run, frame, 40.0, 30.0, 8.0, set(), run_flip, {"Mirror"}, 0.02, item))
+    oracle.write_results(tmp_path / "atrium-path2" / "oracle", 4, frames, candidates, rows, {})
+    table = [{"path": "atrium/path2", "variant": variant, "budget_at": "0.5", "run": run} for variant, run in runs.items()]
+    (pair,) = selection_eval.paired(table, tmp_path)
+    assert (pair["first"], pair["second"], pair["judged_frames"]) == ("benefit", "measured", len(frames))
+    assert pair["difference"] > 0 and pair["difference_lo"] > 0 and pair["verdict"] == "benefit captures more"
+    assert "| atrium/path2 | 0.50 | benefit - measured | +0.3" in selection_eval.paired_markdown([pair])
+    sys.modules.pop("selection_eval", None)
