@@ -73,7 +73,7 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
         assert lines[run].startswith("done") and "4 frames in lockstep with 3 other runs" in lines[run], lines[run]
         summary = run_files.read_summary(folder / run)
         assert summary["frame_count"] == 4 and summary["budget_source"]["method"] == "runs"
-        assert summary["lockstep_runs"] == 4
+        assert summary["lockstep_runs"] == (1 if run == HYBRIDS[1] else 4)  # HYBRIDS[1]: redone alone below
     # Every run wrote frame f before any wrote frame f + 1: the images in the order they were written
     # go 1, 1, 1, 1, 2, 2... (one run after the other would go 1, 2, 3, 4, 1, 2...).
     assert written == [frame for frame in range(1, 5) for _ in HYBRIDS]
@@ -82,7 +82,7 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
         rows = {row["run"]: row for row in csv.DictReader(handle)}
     for run in HYBRIDS:  # the drift against the raster run is reported, and the oracle judged each run
         assert float(rows[run]["speed_vs_raster"]) > 0 and int(rows[run]["judged_frames"]) == 2, rows[run]
-        assert rows[run]["lockstep_runs"] == "4"
+        assert rows[run]["lockstep_runs"] == ("1" if run == HYBRIDS[1] else "4")
     assert rows["showcase-Camera-raster"]["lockstep_runs"] == ""
 
 
