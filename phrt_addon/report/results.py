@@ -5,7 +5,8 @@ each variant's captured share of the oracle's error reduction with its 90%
 interval (``captured.py``), its LDR-FLIP, popping, p95 / budget and share of
 frames within budget, numbers rounded to what they can mean (a budget in
 whole milliseconds, a share to 2 decimals), and a verdict per pair of
-variants that names a winner only when the intervals do not overlap.
+variants that names a winner only when the intervals do not overlap, with the
+paired difference on the frames both were judged on beside it.
 """
 from . import captured
 from .markup import ReportTable
@@ -38,13 +39,31 @@ def _as_captured(row) -> captured.Captured:
 
 
 def verdicts(rows) -> list:
-    """One sentence per pair of variants at one budget: who captures more, or 'no difference'."""
+    """One sentence per pair of variants at one budget: who captures more, or 'no difference' (their
+    own intervals); with both runs' judged frames (``judged_errors``), the paired difference on the
+    frames both have too (``captured.paired_difference``: a difference only when its interval
+    leaves out 0)."""
     sentences = []
     for index, first in enumerate(rows):
         for second in rows[index + 1:]:
             verdict = captured.verdict(_name(first), _as_captured(first), _name(second), _as_captured(second))
-            sentences.append(f"{_name(first)} against {_name(second)}: {verdict}")
+            sentences.append(f"{_name(first)} against {_name(second)}: {verdict}{_paired(first, second)}")
     return sentences
+
+
+def _paired(first, second) -> str:
+    """'; paired on the same N frames: +0.21 [+0.02, +0.33], benefit captures more' or ''."""
+    a, b = first.get("judged_errors"), second.get("judged_errors")
+    if not a or not b:
+        return ""
+    frames = sorted(set(a) & set(b))
+    difference, low, high = captured.paired_difference([a[f][0] for f in frames], [a[f][1] for f in frames],
+                                                       [b[f][1] for f in frames], [a[f][2] for f in frames])
+    if low is None:
+        return ""
+    said = captured.NO_DIFFERENCE if low <= 0.0 <= high else \
+        f"{_name(first) if difference > 0 else _name(second)} captures more"
+    return f"; paired on the same {len(frames)} frames: {difference:+.2f} [{low:+.2f}, {high:+.2f}], {said}"
 
 
 def by_budget(rows) -> dict:

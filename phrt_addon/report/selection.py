@@ -72,6 +72,7 @@ class RunRegret:
     # The run's own T over the oracle's capacity, summed over the judged frames: how much of the
     # budget's nominal time for tracing the run still had after its bookkeeping and the machine's drift.
     time_left_share: float | None = None
+    judged_errors: dict = field(default_factory=dict)  # frame -> (raster, run, oracle) LDR-FLIP
     judged: Captured = field(default_factory=Captured)  # the captured share over the judged frames
     oracle_only: dict = field(default_factory=dict)
     heuristic_only: dict = field(default_factory=dict)
@@ -115,6 +116,7 @@ def run_regrets(runs, results):
                         and row["heuristic_cost_ms"] > row["capacity_ms"] + 1e-9),
             lost_share=None if share.share is None else 1.0 - share.share,
             time_left_share=time_left_share(rows),
+            judged_errors={row["frame"]: (row["raster_flip"], row["heuristic_flip"], row["oracle_flip"]) for row in rows},
             oracle_only=oracle_only, heuristic_only=heuristic_only, judged=share)
     return regrets
 
@@ -182,6 +184,8 @@ def sweep_rows(runs, errors, regrets, pops, references):
             if raster is not None and raster is not run else None,
             "time_left_share": regret.time_left_share if regret is not None else None,
             "lockstep_runs": run.summary.get("lockstep_runs"),
+            # Not a column: the judged frames' errors, for the paired verdicts (results.verdicts).
+            "judged_errors": regret.judged_errors if regret is not None else None,
         })
     return rows
 

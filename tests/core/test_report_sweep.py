@@ -208,3 +208,21 @@ def test_variants_differ_only_when_their_intervals_do_not_overlap():
     assert results.verdicts(overlapping) == ["measured against benefit: no difference"]
     apart = [overlapping[0], {**overlapping[1], "captured": 0.85, "captured_lo": 0.75, "captured_hi": 0.93}]
     assert results.verdicts(apart) == ["measured against benefit: benefit captures more"]
+
+
+def test_the_verdict_gives_the_paired_difference_on_the_frames_both_runs_were_judged_on():
+    from phrt.phrt_addon.report import results
+    generator = np.random.default_rng(5)
+    possible = generator.gamma(0.6, 0.004, 24)
+    shared = generator.normal(0, 0.4, 24)  # both runs miss the same hard frames
+    errors = {name: {frame: (0.02 + gain, 0.02 + gain * (1 - share - lift + noise), 0.02)
+                     for frame, gain, lift, noise in zip(range(4, 100, 4), possible, shared,
+                                                          generator.normal(0, 0.03, 24))}
+              for name, share in (("measured", 0.4), ("benefit", 0.6))}
+    rows = [{"mode": "HYBRID", "variant": "x", "variant_name": name, "captured": 0.5, "captured_lo": 0.1,
+             "captured_hi": 0.9, "judged_errors": errors[name]} for name in ("measured", "benefit")]
+    (sentence,) = results.verdicts(rows)
+    assert sentence.startswith("measured against benefit: no difference; paired on the same 24 frames: -0.")
+    assert sentence.endswith("benefit captures more")
+    rows[1]["judged_errors"] = {}  # a run without an oracle: its own intervals only
+    assert results.verdicts(rows) == ["measured against benefit: no difference"]
