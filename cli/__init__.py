@@ -289,6 +289,9 @@ def _run_sweep(plan, folder, label, camera_name, frame_range, resolution, execut
           f"{resolution[0]}x{resolution[1]}: {len(plan.runs)} runs and the oracle -> {plan_path}", flush=True)
     progress = run_progress.Progress(total, sys.stderr)
     counter = [0]
+    if hasattr(executor, "on_frame"):  # a lockstep group: its frames on the progress line
+        executor.on_frame = lambda done, frames, runs: progress.under_way(
+            f"{runs} runs in lockstep, frame {done}/{frames}")
 
     def show(outcome):
         counter[0] += 1

@@ -34,11 +34,12 @@ from ..engine.runs.interrupts import stop_on_signals
 from ..phrt_addon.runs import plan as plan_module
 
 
-def execute_group(plan_path, job_ids) -> list:
+def execute_group(plan_path, job_ids, on_frame=None) -> list:
     """Run the hybrid run jobs ``job_ids`` (one path of the plan at ``plan_path``) in lockstep;
     complete ones are skipped.  One outcome per job: a run that fails (bad input, an error in one
     of its frames, its render stopped) fails alone, the others go on and are published.  A signal
-    stops the group between frames (``SweepInterrupted``, nothing of it kept)."""
+    stops the group between frames (``SweepInterrupted``, nothing of it kept).  ``on_frame(done,
+    total, runs)`` after each round: frames every run has rendered, of ``total``."""
     plan_path = Path(plan_path)
     folder = plan_path.parent
     begin = time.perf_counter()
@@ -63,7 +64,7 @@ def execute_group(plan_path, job_ids) -> list:
                 for job in jobs]
     if todo:
         with blender_process.quiet_stdout():
-            results = _lockstep(plan, folder, [job for job, _ in todo], scene, camera)
+            results = _lockstep(plan, folder, [job for job, _ in todo], scene, camera, on_frame)
         seconds = (time.perf_counter() - begin) / len(todo)  # the group's time, shared
         for (job, redo), (result, failure) in zip(todo, results):
             partial = plan_module.partial_dir(folder, job)
@@ -72,7 +73,8 @@ def execute_group(plan_path, job_ids) -> list:
                 outcomes[job.id] = plan_module.JobOutcome(job.id, "failed", seconds, failure)
                 continue
             plan_module.publish(partial, folder / job.id)
-            message = f"{result.frames_done} frames in lockstep with {len(todo) - 1} other runs, " \
+            others = len(todo) - 1
+            message = f"{result.frames_done} frames in lockstep with {others} other run{'' if others == 1 else 's'}, " \
                       f"mean {result.summary['total_ms']['mean']:.0f} ms"
             if job.budget_at is not None:
                 message += f", budget {result.summary['budget_ms']:.0f} ms"
@@ -82,12 +84,13 @@ def execute_group(plan_path, job_ids) -> list:
     return [outcomes[job.id] for job in jobs]
 
 
-def step_in_lockstep(runs, before_step=None, stopped=lambda: False) -> dict:
+def step_in_lockstep(runs, before_step=None, stopped=lambda: False, after_round=None) -> dict:
     """Step ``runs`` (objects with ``remaining`` and ``step()``) frame by frame together: each round,
     every run still going renders its next frame, the round starting with the next run in turn (no
     run is always first or last).  A run whose step raises is left out from then on; the others go
     on.  ``before_step(run)`` runs before each step; ``stopped()`` is polled before each step (a
-    signal: the caller stops the group).  Returns {index of a failed run: its exception}."""
+    signal: the caller stops the group); ``after_round(rounds)`` after each complete round.  Returns
+    {index of a failed run: its exception}."""
     failed = {}
     count = len(runs)
     round_index = 0
@@ -105,6 +108,8 @@ def step_in_lockstep(runs, before_step=None, stopped=lambda: False) -> dict:
             except Exception as error:  # this run fails alone
                 failed[index] = error
         round_index += 1
+        if after_round is not None:
+            after_round(round_index)
     return failed
 
 
@@ -114,7 +119,7 @@ def _failure(run, error) -> str:
     return f"{type(error).__name__}: {str(error).strip().splitlines()[0] if str(error).strip() else ''}".rstrip(": ")
 
 
-def _lockstep(plan, folder, jobs, scene, camera) -> list:
+def _lockstep(plan, folder, jobs, scene, camera, on_frame=None) -> list:
     """Open a ``ReplayRun`` per job (at its partial folder), step them in lockstep, finish them;
     returns per job (``ReplayResult``, None) or (None, the one-line reason it failed).  The scene is
     restored once, at the end, as the first run found it."""
@@ -132,11 +137,17 @@ def _lockstep(plan, folder, jobs, scene, camera) -> list:
                 results[index] = (None, str(error).strip().splitlines()[0])
         received = []
 
+        total = plan.frames[1] - plan.frames[0] + 1
+
         def switch(run):
             engine_session.replay = run.state  # the frame renderer this render uses
 
+        def rounds_done(count):
+            if on_frame is not None:
+                on_frame(count, total, len(runs))
+
         with stop_on_signals(received):
-            failed = step_in_lockstep(runs, switch, lambda: bool(received))
+            failed = step_in_lockstep(runs, switch, lambda: bool(received), after_round=rounds_done)
         if received:
             raise SweepInterrupted(received[0], jobs[opened[0]].id if opened else jobs[0].id,
                                    min((run.done for run in runs), default=0))
@@ -181,6 +192,7 @@ class LockstepExecutor:
 
     def __init__(self, group=execute_group):
         self.group = group
+        self.on_frame = None  # on_frame(done, total, runs) during a group (the sweep's progress line)
 
     def run(self, plan_path, plan, execute, on_outcome=None):
         outcomes, failed, handled = [], set(), set()
@@ -209,7 +221,7 @@ class LockstepExecutor:
                                  for dependency in other.depends_on)]
                 begin = time.perf_counter()
                 try:
-                    results = self.group(str(plan_path), [other.id for other in group])
+                    results = self.group(str(plan_path), [other.id for other in group], self.on_frame)
                 except Exception as error:  # the group's failure must not hide what the other jobs did
                     results = [plan_module.JobOutcome(other.id, "failed", time.perf_counter() - begin,
                                                       f"{type(error).__name__}: {error}") for other in group]

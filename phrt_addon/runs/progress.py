@@ -16,6 +16,7 @@ class Progress:
         self.clock = clock
         self.started = clock()
         self.finished = self.skipped = self.failed = 0
+        self.detail = ""  # what the jobs under way have done (a lockstep group's frames), or ""
 
     def eta_s(self) -> float | None:
         ran = self.finished - self.skipped
@@ -28,9 +29,17 @@ class Progress:
         text = f"jobs {self.finished}/{self.total} done ({self.skipped} skipped, {self.failed} failed)"
         if self.finished < self.total:
             text += f", ETA {eta:.0f} s" if eta is not None else ", ETA --"
+            if self.detail:
+                text += f"; {self.detail}"
         return text
 
+    def under_way(self, detail: str):
+        """Show ``detail`` (what the jobs under way have done so far) on the line."""
+        self.detail = detail
+        self.show()
+
     def update(self, outcome):
+        self.detail = ""
         self.finished += 1
         self.skipped += outcome.status == "skipped"
         self.failed += outcome.status == "failed"

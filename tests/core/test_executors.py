@@ -84,6 +84,15 @@ def test_progress_shows_jobs_done_and_an_eta_from_the_jobs_that_ran():
     assert stream.getvalue().endswith("jobs 5/5 done (1 skipped, 1 failed)\n")
 
 
+def test_progress_shows_what_the_jobs_under_way_have_done_until_the_next_outcome():
+    stream = Terminal()
+    progress = run_progress.Progress(3, stream, clock=lambda: 0.0)
+    progress.under_way("9 runs in lockstep, frame 40/200")
+    assert stream.getvalue().endswith("jobs 0/3 done (0 skipped, 0 failed), ETA --; 9 runs in lockstep, frame 40/200")
+    progress.update(plan.JobOutcome("a", "done"))
+    assert "lockstep" not in progress.line()
+
+
 def test_progress_is_silent_when_stderr_is_not_a_terminal():
     stream = io.StringIO()
     progress = run_progress.Progress(2, stream)

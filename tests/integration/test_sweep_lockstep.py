@@ -126,12 +126,16 @@ def test_the_executor_runs_each_paths_hybrid_runs_as_one_group_after_their_refer
         calls.append(job_id)
         return plan_module.JobOutcome(job_id, "done")
 
-    def group(_, job_ids):
+    def group(_, job_ids, on_frame=None):
         calls.append(tuple(job_ids))
+        on_frame(2, 2, len(job_ids))  # the group reports its rounds to the sweep's progress line
         return [plan_module.JobOutcome(job_id, "done") for job_id in job_ids]
 
-    seen = []
-    outcomes = lockstep.LockstepExecutor(group).run("plan.json", plan, execute, on_outcome=seen.append)
+    seen, frames = [], []
+    executor = lockstep.LockstepExecutor(group)
+    executor.on_frame = lambda done, total, runs: frames.append((done, total, runs))
+    outcomes = executor.run("plan.json", plan, execute, on_outcome=seen.append)
+    assert frames == [(2, 2, 3), (2, 2, 3)]
     assert calls == ["s-path1-raster", "s-path1-raytrace", tuple(hybrids[:3]),
                      "s-path2-raster", "s-path2-raytrace", tuple(hybrids[3:]), "oracle"]
     assert [outcome.job_id for outcome in outcomes] == [outcome.job_id for outcome in seen]
@@ -144,7 +148,7 @@ def test_a_failed_reference_or_group_fails_its_runs_and_the_rest_goes_on():
     def execute(_, job_id):
         return plan_module.JobOutcome(job_id, "failed" if job_id == "s-path1-raytrace" else "done", message="x")
 
-    def group(_, job_ids):
+    def group(_, job_ids, on_frame=None):
         raise RuntimeError("the GPU went away")
 
     outcomes = {outcome.job_id: outcome for outcome in lockstep.LockstepExecutor(group).run("p", plan, execute)}
@@ -170,11 +174,13 @@ class StubRun:
 
 
 def test_lockstep_renders_each_frame_of_every_run_before_the_next_starting_with_the_next_run():
-    log, switched = [], []
+    log, switched, rounds = [], [], []
     runs = [StubRun(name, 3, log) for name in "abc"]
-    assert lockstep.step_in_lockstep(runs, before_step=lambda run: switched.append(run.name)) == {}
+    assert lockstep.step_in_lockstep(runs, before_step=lambda run: switched.append(run.name),
+                                     after_round=lambda count: rounds.append((count, len(log)))) == {}
     assert log == [("a", 1), ("b", 1), ("c", 1), ("b", 2), ("c", 2), ("a", 2), ("c", 3), ("a", 3), ("b", 3)]
     assert switched == [name for name, _ in log]  # each step's renderer switched in before it
+    assert rounds == [(1, 3), (2, 6), (3, 9)]  # after each complete round
 
 
 def test_a_run_that_fails_is_left_out_and_the_others_finish():
