@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from . import blender_process
-from .sweep import SweepInterrupted, clear_dead_attempts, redo_reason, run_arguments, open_scene
+from .sweep import SweepInterrupted, clear_dead_attempts, open_scene, redo_reason, run_arguments, run_message
 from ..engine import session
 from ..engine.runs import camera_path, replay
 from ..engine.runs.interrupts import stop_on_signals
@@ -74,10 +74,7 @@ def execute_group(plan_path, job_ids, on_frame=None) -> list:
                 continue
             plan_module.publish(partial, folder / job.id)
             others = len(todo) - 1
-            message = f"{result.frames_done} frames in lockstep with {others} other run{'' if others == 1 else 's'}, " \
-                      f"mean {result.summary['total_ms']['mean']:.0f} ms"
-            if job.budget_at is not None:
-                message += f", budget {result.summary['budget_ms']:.0f} ms"
+            message = run_message(job, result, f" in lockstep with {others} other run{'' if others == 1 else 's'}")
             if redo != "no run yet":
                 message = f"redone: {redo}; {message}"
             outcomes[job.id] = plan_module.JobOutcome(job.id, "done", seconds, message)

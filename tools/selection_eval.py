@@ -155,12 +155,8 @@ def paired(table, out: Path) -> list:
                 difference, low, high = captured.paired_difference(
                     [a[f]["raster_flip"] for f in frames], [a[f]["heuristic_flip"] for f in frames],
                     [b[f]["heuristic_flip"] for f in frames], [a[f]["oracle_flip"] for f in frames])
-                if low is None:
-                    verdict = "not judged" if difference is None else captured.NO_DIFFERENCE
-                elif low > 0 or high < 0:
-                    verdict = f"{first if difference > 0 else second} captures more"
-                else:
-                    verdict = captured.NO_DIFFERENCE
+                verdict = "not judged" if difference is None else \
+                    captured.paired_verdict(first, second, difference, low, high)
                 rows.append({"path": path, "budget_at": budget, "first": first, "second": second,
                              "difference": difference, "difference_lo": low, "difference_hi": high,
                              "judged_frames": len(frames), "verdict": verdict})

@@ -158,3 +158,11 @@ def verdict(name_a: str, a: Captured, name_b: str, b: Captured) -> str:
     if a.share is None or b.share is None or overlap(a.interval, b.interval):
         return NO_DIFFERENCE
     return f"{name_a if a.share > b.share else name_b} captures more"
+
+
+def paired_verdict(name_a: str, name_b: str, difference, low, high) -> str:
+    """The verdict of a :func:`paired_difference` (a - b): "<name> captures more" when its interval
+    leaves out 0, else :data:`NO_DIFFERENCE` (also without an interval)."""
+    if difference is None or low is None or high is None or low <= 0.0 <= high:
+        return NO_DIFFERENCE
+    return f"{name_a if difference > 0 else name_b} captures more"

@@ -61,8 +61,7 @@ def _paired(first, second) -> str:
                                                        [b[f][1] for f in frames], [a[f][2] for f in frames])
     if low is None:
         return ""
-    said = captured.NO_DIFFERENCE if low <= 0.0 <= high else \
-        f"{_name(first) if difference > 0 else _name(second)} captures more"
+    said = captured.paired_verdict(_name(first), _name(second), difference, low, high)
     return f"; paired on the same {len(frames)} frames: {difference:+.2f} [{low:+.2f}, {high:+.2f}], {said}"
 
 

@@ -88,6 +88,8 @@ def test_the_paired_difference_tells_apart_what_two_overlapping_intervals_cannot
     assert difference == pytest.approx(a.share - b.share)
     assert captured.overlap(a.interval, b.interval)  # one run's interval each: "no difference"
     assert 0.0 < low < difference < high and high - low < min(a.high - a.low, b.high - b.low)
+    assert captured.paired_verdict("a", "b", difference, low, high) == "a captures more"
+    assert captured.paired_verdict("a", "b", 0.1, -0.05, 0.2) == captured.NO_DIFFERENCE
 
 
 def test_a_run_paired_with_itself_differs_by_nothing_and_no_gain_gives_none():

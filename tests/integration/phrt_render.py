@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import bpy
@@ -18,6 +20,24 @@ from phrt.phrt_addon.report import metrics
 from exr_passes import read_passes
 
 MODES = ("RASTER", "HYBRID", "RAYTRACE")
+PHRT = Path(sys.executable).with_name("phrt")
+
+
+def run_phrt(args, cwd, timeout=900):
+    """``.venv/bin/phrt ARGS`` in ``cwd``: (exit status, stdout, stderr lines but EGL's noise)."""
+    process = subprocess.run([str(PHRT), *args], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    errors = [line for line in process.stderr.splitlines() if line.strip() and "EGL" not in line]
+    return process.returncode, process.stdout, errors
+
+
+def job_lines(stdout):
+    """{job id: the rest of its progress line} from a sweep's output."""
+    found = {}
+    for line in stdout.splitlines():
+        if line.startswith("phrt: [") and "] " in line:
+            job, rest = line.split("] ", 1)[1].split(": ", 1)
+            found[job] = rest
+    return found
 
 
 def save_moving_showcase(path: Path, width: int, height: int) -> Path:

@@ -7,10 +7,7 @@ from __future__ import annotations
 import csv
 import os
 import shutil
-import subprocess
-import sys
 import tempfile
-from pathlib import Path
 
 os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="phrt-user-"))
 
@@ -21,29 +18,12 @@ import phrt  # noqa: E402
 from phrt.cli import lockstep  # noqa: E402
 from phrt.phrt_addon.runs import plan as plan_module  # noqa: E402
 from phrt.phrt_addon.runs import run_files  # noqa: E402
-from phrt_render import save_moving_showcase  # noqa: E402
+from phrt_render import job_lines, run_phrt, save_moving_showcase  # noqa: E402
 
-PHRT = Path(sys.executable).with_name("phrt")
 SWEEP = ["--frames", "1-4", "--budget-at", "0.25,0.75", "--variants", "measured,benefit", "--resolution", "64x48",
          "--oracle-every", "2", "--lockstep", "--out", "sw"]
 HYBRIDS = [f"showcase-Camera-hybrid-at{fraction}-{variant}" for fraction in ("0.25", "0.75")
            for variant in ("measured", "benefit")]
-
-
-def run_phrt(args, cwd):
-    process = subprocess.run([str(PHRT), *args], cwd=cwd, capture_output=True, text=True, timeout=900)
-    errors = [line for line in process.stderr.splitlines() if line.strip() and "EGL" not in line]
-    return process.returncode, process.stdout, errors
-
-
-def progress(stdout):
-    """{job id: the rest of its progress line}."""
-    found = {}
-    for line in stdout.splitlines():
-        if line.startswith("phrt: [") and "] " in line:
-            job, rest = line.split("] ", 1)[1].split(": ", 1)
-            found[job] = rest
-    return found
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +47,7 @@ def sweeps(tmp_path_factory):
 def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
     folder, (status, stdout, errors, written), _, _ = sweeps
     assert status == 0, errors
-    lines = progress(stdout)
+    lines = job_lines(stdout)
     assert set(lines) == {"showcase-Camera-raster", "showcase-Camera-raytrace", *HYBRIDS, "oracle"}
     for run in HYBRIDS:
         assert lines[run].startswith("done") and "4 frames in lockstep with 3 other runs" in lines[run], lines[run]
@@ -89,11 +69,11 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
 def test_a_lockstep_sweep_run_again_skips_complete_runs_and_redoes_a_missing_one(sweeps):
     folder, _, (status, stdout, errors), (status_3, stdout_3, errors_3) = sweeps
     assert status == 0, errors
-    assert {line.split()[0] for line in progress(stdout).values()} == {"skipped"}
+    assert {line.split()[0] for line in job_lines(stdout).values()} == {"skipped"}
     assert status_3 == 0, errors_3
-    done = {job for job, line in progress(stdout_3).items() if line.startswith("done")}
+    done = {job for job, line in job_lines(stdout_3).items() if line.startswith("done")}
     assert done == {HYBRIDS[1], "oracle"}  # alone in its group: the complete runs stay as they are
-    assert "4 frames in lockstep with 0 other runs" in progress(stdout_3)[HYBRIDS[1]]
+    assert "4 frames in lockstep with 0 other runs" in job_lines(stdout_3)[HYBRIDS[1]]
     assert run_files.read_summary(folder / HYBRIDS[1])["frame_count"] == 4
     assert run_files.read_summary(folder / HYBRIDS[1])["lockstep_runs"] == 1  # said, not hidden
 

@@ -4,8 +4,6 @@ and says why in one line; it skips a run only when the work is the same.  Subpro
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
@@ -16,27 +14,10 @@ import pytest  # noqa: E402
 
 import phrt  # noqa: E402
 from phrt.phrt_addon.runs import run_files  # noqa: E402
-from phrt_render import save_moving_showcase  # noqa: E402
+from phrt_render import job_lines, run_phrt, save_moving_showcase  # noqa: E402
 
-PHRT = Path(sys.executable).with_name("phrt")
 SWEEP = ["--budgets", "1", "--variants", "measured", "--resolution", "64x48", "--oracle-every", "3", "--out", "sw"]
 RUNS = ("showcase-Camera-raster", "showcase-Camera-raytrace", "showcase-Camera-hybrid-at0.50-measured")
-
-
-def run_phrt(args, cwd):
-    process = subprocess.run([str(PHRT), *args], cwd=cwd, capture_output=True, text=True, timeout=900)
-    errors = [line for line in process.stderr.splitlines() if line.strip() and "EGL" not in line]
-    return process.returncode, process.stdout, errors
-
-
-def job_lines(stdout):
-    """{job id: the rest of its progress line} from the sweep's output."""
-    found = {}
-    for line in stdout.splitlines():
-        if line.startswith("phrt: [") and "] " in line:
-            job, rest = line.split("] ", 1)[1].split(": ", 1)
-            found[job] = rest
-    return found
 
 
 def edit_blend(path: Path):
