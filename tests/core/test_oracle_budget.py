@@ -72,9 +72,10 @@ def test_rescore_judges_recorded_choices_on_the_oracles_measurements(tmp_path):
     best = write_run(tmp_path, "best", {4: {"mirror"}, 8: {"mirror"}}, extra)
     cheap = write_run(tmp_path, "cheap", {4: {"fence"}, 8: {"glass", "fence"}})
     rows = []
-    for run, picks in ((best, ({"mirror"}, {"mirror"})), (cheap, ({"fence"}, {"glass", "fence"}))):
+    # The best run kept 10 ms for tracing (the nominal 13 less its bookkeeping), the cheap one 20.
+    for run, picks, own_ms in ((best, ({"mirror"}, {"mirror"}), 10.0), (cheap, ({"fence"}, {"glass", "fence"}), 20.0)):
         for frame, pick in zip(frames, picks):
-            rows.append(oracle.regret_row(run.name, frame.frame, 60.0, 47.0, 10.0, pick, 0.08, {"mirror"}, 0.07,
+            rows.append(oracle.regret_row(run.name, frame.frame, 60.0, 47.0, own_ms, pick, 0.08, {"mirror"}, 0.07,
                                           frame))
     oracle.write_results(tmp_path / oracle.ORACLE_DIR, 4, [4, 8], frames, rows, {"best": best, "cheap": cheap})
     scored, folder = rescore.rescore(tmp_path)
@@ -82,6 +83,10 @@ def test_rescore_judges_recorded_choices_on_the_oracles_measurements(tmp_path):
     assert by_run["best"]["captured_additive"] == pytest.approx(1.0)
     assert by_run["cheap"]["captured_additive"] == pytest.approx((0.005 + 0.015) / 0.06)
     assert by_run["best"]["over_capacity_frames"] == 0
+    # In 10 ms (1 fixed) the best subset is glass and fence (0.015 of the mirror's 0.03); in 20 the
+    # three (0.045): the time a run kept bounds what any choice of it could capture.
+    assert by_run["best"]["own_time_additive"] == pytest.approx(0.5)
+    assert by_run["cheap"]["own_time_additive"] == pytest.approx(0.045 / 0.03)
     assert by_run["best"]["median_predicted_over_measured"] == pytest.approx(5.0 / 11.0)
     assert by_run["cheap"]["median_predicted_over_measured"] is None  # no predicted_ms recorded
     assert by_run["best"]["benefit_rank_correlation"] == pytest.approx(1.0)
