@@ -17,6 +17,10 @@ Items of value <= 0, or that cannot fit alone, are never chosen; items of cost 0
 From ``REDUCE_FROM`` items on, :mod:`knapsack_bounds` first fixes the items every optimum takes
 or leaves (a Lagrangian bound against a greedy's value), and the programme runs over the rest
 only: the same choice (for the same rounded costs), at a fraction of the programme's rows.
+Up to ``ENUMERATE_LIMIT`` useful items, :func:`solve_grouped` (the selection's every frame) tries
+every subset instead, on the costs as they are: exact, without the bins' rounding, and a few
+numpy calls on a table of at most 2 ** ENUMERATE_LIMIT rows rather than one row of calls per item
+(5 and 10 items in 3 groups: 0.21 and 0.26 ms the programme, 0.06 and 0.14 the enumeration).
 """
 from __future__ import annotations
 
@@ -32,6 +36,7 @@ MAX_BINS = 4096
 # Items from which the bound's reduction runs first (knapsack_bounds): below it the programme
 # over every item costs less than the bound (about 0.2 ms of numpy calls either way).
 REDUCE_FROM = 48
+ENUMERATE_LIMIT = 10
 
 
 LARGE = np.finfo(np.float64).max / 4
@@ -260,6 +265,9 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
     useful = np.flatnonzero((values > 0) & (total <= capacity))
     if len(useful) == 0:
         return chosen
+    if len(useful) <= ENUMERATE_LIMIT:
+        chosen[useful[_enumerated(values[useful], costs[useful], groups[useful], group_costs, capacity)]] = True
+        return chosen
     if len(useful) > EXACT_LIMIT or capacity <= 0:
         return _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins)
     n_bins = bins_for(len(useful) + len(group_costs), bins)
@@ -270,6 +278,21 @@ def solve_grouped(values, costs, groups, group_costs, capacity, bins: int = DEFA
         chosen[:] = False
         chosen[single] = True
     return chosen
+
+
+def _enumerated(values, costs, groups, group_costs, capacity) -> np.ndarray:
+    """The mask of the most valuable subset of a few items whose costs and opened groups' costs
+    fit ``capacity`` (exact; of equal values the cheapest)."""
+    n = len(values)
+    subsets = ((np.arange(1 << n)[:, None] >> np.arange(n)) & 1).astype(bool)  # every subset, one a row
+    member = np.zeros((n, len(group_costs)))
+    member[np.arange(n), groups] = 1.0
+    opened = (subsets @ member) > 0
+    spent = subsets @ costs + opened @ group_costs
+    worth = subsets @ values
+    fits = np.flatnonzero(spent <= capacity)  # the empty subset always fits
+    best = fits[np.lexsort((spent[fits], -worth[fits]))[0]]
+    return subsets[best]
 
 
 SUBSET_GROUPS = 4

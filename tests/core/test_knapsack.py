@@ -2,6 +2,7 @@
 from itertools import product
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
 from phrt_addon.select import knapsack
@@ -207,3 +208,17 @@ def test_grouped_takes_free_items_with_no_time_left_beyond_the_exact_limit():
     """T = 0: items of cost 0 in a group of cost 0 are free (hypothesis found the fallback missing them)."""
     assert knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [0.0, 0.0, 0.0], 0.0).tolist() == [True, True]
     assert knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [1.0, 0.0, 0.0], 0.0).tolist() == [False, False]
+
+
+@settings(max_examples=300, deadline=None)
+@given(grouped_instances)
+def test_grouped_with_few_useful_items_is_the_exact_optimum(instance):
+    """Up to ENUMERATE_LIMIT useful items every subset is tried on the costs as they are: the
+    optimum itself, no bin lost to rounding, never over the time."""
+    values, costs, groups, group_costs, capacity = (np.array(instance[0]), np.array(instance[1]),
+                                                    np.array(instance[2]), np.array(instance[3]), instance[4])
+    assert len(values) <= knapsack.ENUMERATE_LIMIT
+    chosen = knapsack.solve_grouped(values, costs, groups, group_costs, capacity)
+    assert costs[chosen].sum() + group_costs[np.unique(groups[chosen])].sum() <= capacity * (1 + 1e-12)
+    assert values[chosen].sum() == pytest.approx(grouped_brute_force(values, costs, groups, group_costs, capacity),
+                                                 abs=1e-9)

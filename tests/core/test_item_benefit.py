@@ -1,0 +1,59 @@
+"""What each traced item changed (select/item_benefit.measure): only the traced pixels looked at,
+the same sums as frame-sized maps of each pixel's owner (the transparent layer's element where
+both layers traced a pixel)."""
+from types import SimpleNamespace
+
+import numpy as np
+
+from phrt.phrt_addon.select import item_benefit
+
+
+def owners_by_maps(layers, traced, change, n):
+    """The measure by frame-sized owner maps (the former implementation): the reference."""
+    flat_change = change.reshape(-1, change.shape[-1])
+    result = np.zeros((n, 3))
+    for effect, column in (("reflections", 1), ("refractions", 2)):
+        owner = np.full(len(flat_change), -1, np.int64)
+        for layer_name in ("opaque", "transparent"):
+            pixels = layers[layer_name]
+            element_at = np.full(len(flat_change), -1, np.int64)
+            element_at[pixels.flat] = pixels.element
+            if effect == "reflections" and layer_name in traced.reflection:
+                where = traced.reflection[layer_name][0]
+                if layer_name == "transparent" and traced.refraction is not None:
+                    where = np.setdiff1d(where, traced.refraction[0])
+                owner[where] = element_at[where]
+            if effect == "refractions" and layer_name == "transparent" and traced.refraction is not None:
+                owner[traced.refraction[0]] = element_at[traced.refraction[0]]
+        mine = np.flatnonzero((owner >= 0) & (owner < n))
+        result[:, column] = np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)[:n]
+    return result
+
+
+def test_the_traced_pixels_sums_equal_the_owner_maps_on_random_frames():
+    rng = np.random.default_rng(5)
+    height, width, n = 24, 32, 6
+    for case in range(40):
+        layers = {}
+        for name, share in (("opaque", 0.9), ("transparent", 0.3)):
+            flat = np.flatnonzero(rng.random(height * width) < share)
+            layers[name] = SimpleNamespace(flat=flat, element=rng.integers(0, n, len(flat)))
+        pick = (lambda name, share: np.sort(rng.choice(layers[name].flat, int(share * len(layers[name].flat)),
+                                                       replace=False)))
+        reflection = {"opaque": (pick("opaque", 0.4), None)}
+        if case % 2:
+            reflection["transparent"] = (pick("transparent", 0.5), None)
+        refraction = (pick("transparent", 0.6), None) if case % 3 else None
+        traced = SimpleNamespace(reflection=reflection, refraction=refraction, shadow_visibility={})
+        change = rng.random((height, width, 2)).astype(np.float32)
+        chosen = np.ones((n, 3), bool)
+        chosen[:, 0] = False  # no shadows: their sums are benefit.shadow_differences' own
+        snapshot = SimpleNamespace(elements=[SimpleNamespace(shadows=False)] * n)
+        got = item_benefit.measure(snapshot, layers, change, traced, chosen, [None] * n)
+        assert np.allclose(got, owners_by_maps(layers, traced, change, n) * chosen), case
+
+
+def test_an_empty_layer_owns_nothing():
+    layers = {"opaque": SimpleNamespace(flat=np.zeros(0, np.int64), element=np.zeros(0, np.int64)),
+              "transparent": SimpleNamespace(flat=np.zeros(0, np.int64), element=np.zeros(0, np.int64))}
+    assert item_benefit.elements_at(layers["opaque"], np.array([3, 7])).tolist() == [-1, -1]
