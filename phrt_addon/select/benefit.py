@@ -93,6 +93,34 @@ def _prior(layers, n_elements, flags, materials, apart: bool) -> np.ndarray:
     return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0)
 
 
+def elements_at(pixels, where) -> np.ndarray:
+    """The element of each frame pixel ``where`` in a layer's ``pixels`` (its ``flat`` ascending),
+    -1 where the layer has none."""
+    flat = pixels.flat
+    if not len(flat):
+        return np.full(len(where), -1, np.int64)
+    position = np.minimum(np.searchsorted(flat, where), len(flat) - 1)
+    return np.where(flat[position] == where, np.asarray(pixels.element, np.int64)[position], -1)
+
+
+def owned_change(layers, parts, values, n) -> np.ndarray:
+    """(n,) per element, the summed ``values`` (one per frame pixel) of the traced pixels ``parts``
+    ((layer name, flat pixels) in order; a pixel in several parts belongs to the last one's
+    element there).  Only the traced pixels are looked at, not frame-sized maps of owners (1.3 ms
+    -> 0.3 a measured frame at 320x240)."""
+    parts = [(name, np.asarray(where, np.int64)) for name, where in parts if where is not None and len(where)]
+    if not parts:
+        return np.zeros(n)
+    where = np.concatenate([part for _, part in parts])
+    owner = np.concatenate([elements_at(layers[name], part) for name, part in parts])
+    if len(parts) > 1:  # the last part's element owns a pixel traced in several
+        _, last = np.unique(where[::-1], return_index=True)
+        keep = len(where) - 1 - last
+        where, owner = where[keep], owner[keep]
+    mine = (owner >= 0) & (owner < n)
+    return np.bincount(owner[mine], weights=values[where[mine]], minlength=n)[:n]
+
+
 def measure_differences(snapshot, layers, change, traced, selected, element_bounds) -> np.ndarray:
     """Summed per-pixel |traced - raster| (clipped linear luminance) attributable to each element.
 
@@ -103,20 +131,11 @@ def measure_differences(snapshot, layers, change, traced, selected, element_boun
     holds the pixel.  ``traced`` is the frame's ``frame.TracedTerms``.
     """
     n = len(snapshot.elements)
-    difference = np.zeros(n)
     flat_change = np.asarray(change).reshape(-1, change.shape[-1])  # a view: float64 where summed
-    owner = np.full(len(flat_change), -1, np.int64)
-    for layer_name in ("opaque", "transparent"):  # the transparent layer's element wins
-        pixels = layers[layer_name]
-        element_at = np.full(len(flat_change), -1, np.int64)
-        element_at[pixels.flat] = pixels.element
-        traced_pixels = [traced.reflection[layer_name][0]] if layer_name in traced.reflection else []
-        if layer_name == "transparent" and traced.refraction is not None:
-            traced_pixels.append(traced.refraction[0])
-        for where in traced_pixels:
-            owner[where] = element_at[where]
-    mine = np.flatnonzero((owner >= 0) & (owner < n))
-    difference += np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)[:n]
+    parts = [(name, traced.reflection[name][0]) for name in ("opaque", "transparent") if name in traced.reflection]
+    if traced.refraction is not None:
+        parts.append(("transparent", traced.refraction[0]))
+    difference = owned_change(layers, parts, flat_change[:, 0], n)
     return difference + shadow_differences(snapshot, layers, change, traced, selected, element_bounds)
 
 

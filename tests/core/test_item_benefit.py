@@ -1,11 +1,12 @@
-"""What each traced item changed (select/item_benefit.measure): only the traced pixels looked at,
-the same sums as frame-sized maps of each pixel's owner (the transparent layer's element where
-both layers traced a pixel)."""
+"""What each traced item changed (select/item_benefit.measure) and each traced element
+(select/benefit.measure_differences): only the traced pixels looked at (benefit.owned_change), the
+same sums as frame-sized maps of each pixel's owner (the transparent layer's element where both
+layers traced a pixel)."""
 from types import SimpleNamespace
 
 import numpy as np
 
-from phrt.phrt_addon.select import item_benefit
+from phrt.phrt_addon.select import benefit, item_benefit
 
 
 def owners_by_maps(layers, traced, change, n):
@@ -54,6 +55,37 @@ def test_the_traced_pixels_sums_equal_the_owner_maps_on_random_frames():
 
 
 def test_an_empty_layer_owns_nothing():
-    layers = {"opaque": SimpleNamespace(flat=np.zeros(0, np.int64), element=np.zeros(0, np.int64)),
-              "transparent": SimpleNamespace(flat=np.zeros(0, np.int64), element=np.zeros(0, np.int64))}
-    assert item_benefit.elements_at(layers["opaque"], np.array([3, 7])).tolist() == [-1, -1]
+    empty = SimpleNamespace(flat=np.zeros(0, np.int64), element=np.zeros(0, np.int64))
+    assert benefit.elements_at(empty, np.array([3, 7])).tolist() == [-1, -1]
+
+
+def test_the_error_aware_relevances_sums_equal_the_owner_maps_too():
+    """benefit.measure_differences (the `error` relevance): one sum per element, the transparent
+    layer's reflection then its refraction owning a pixel over the opaque layer's reflection."""
+    rng = np.random.default_rng(9)
+    height, width, n = 24, 32, 6
+    for case in range(30):
+        layers = {}
+        for name, share in (("opaque", 0.9), ("transparent", 0.3)):
+            flat = np.flatnonzero(rng.random(height * width) < share)
+            layers[name] = SimpleNamespace(flat=flat, element=rng.integers(0, n, len(flat)))
+        reflection = {name: (np.sort(rng.choice(layers[name].flat, len(layers[name].flat) // 2, replace=False)), None)
+                      for name in ("opaque", "transparent")[:1 + case % 2]}
+        refraction = (np.sort(rng.choice(layers["transparent"].flat, len(layers["transparent"].flat) // 3,
+                                         replace=False)), None) if case % 3 else None
+        traced = SimpleNamespace(reflection=reflection, refraction=refraction, shadow_visibility={})
+        change = rng.random((height, width, 2)).astype(np.float32)
+        flat_change = change.reshape(-1, 2)
+        owner = np.full(height * width, -1, np.int64)
+        for name in ("opaque", "transparent"):
+            element_at = np.full(height * width, -1, np.int64)
+            element_at[layers[name].flat] = layers[name].element
+            wheres = ([reflection[name][0]] if name in reflection else []) + \
+                ([refraction[0]] if name == "transparent" and refraction is not None else [])
+            for where in wheres:
+                owner[where] = element_at[where]
+        mine = owner >= 0
+        expected = np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)
+        snapshot = SimpleNamespace(elements=[SimpleNamespace(shadows=False)] * n)
+        got = benefit.measure_differences(snapshot, layers, change, traced, np.zeros(n, bool), [None] * n)
+        assert np.allclose(got, expected), case
