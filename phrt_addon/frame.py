@@ -170,7 +170,8 @@ class FrameRenderer:
             # overhead, charged against T, holds it): not taken from T twice.  It was, every
             # PRIOR_EVERY frames, and items that just fit were dropped for that frame and taken
             # back the next (atrium path2 at 0.5: flips 8 frames apart).
-            raster_ms=max(raster_ms - raster.setup_ms - (readback_ms if need_priors else 0.0), 0.0))
+            raster_ms=max(raster_ms - raster.setup_ms - (readback_ms if need_priors else 0.0), 0.0),
+            choose=not (use_benefit and self.forced_selection is None))  # BENEFIT chooses its items itself
         choice = item_priors = None
         pixels = item_benefit.item_pixels(area_px, footprint)  # what each (element, effect) item changes
         if use_benefit and self.forced_selection is None:

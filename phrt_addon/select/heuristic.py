@@ -272,7 +272,7 @@ class SelectionResult:
 def select(elements: FrameElements, previous_selection=None, settings: SelectionSettings | None = None,
            model: CostModel | None = None, *, time_left_ms: float | None = None,
            element_ms: np.ndarray | None = None, frame: int | None = None,
-           raster_ms: float | None = None) -> SelectionResult:
+           raster_ms: float | None = None, choose: bool = True) -> SelectionResult:
     """Choose this frame's ray traced elements (sections V.B-V.D).
 
     ``previous_selection``: last frame's selection (see previously_selected_mask).
@@ -280,6 +280,8 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     :class:`CostModel` when None.  ``time_left_ms`` and ``element_ms`` override
     the model's T and predicted ms (tests, replays).  ``raster_ms``: the recurring raster time
     this frame already spent, measured (T is the time left after it), else predicted.
+    ``choose=False``: the terms and T only, for a caller that chooses itself (``BENEFIT``): no
+    element's ms predicted (0), nothing selected, the selection graph not run.
     """
     settings = settings or SelectionSettings()
     model = model or CostModel()
@@ -287,7 +289,9 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     terms = element_terms(elements, previously_selected, settings.selection_weight, settings.max_area_fraction,
                           settings.relevance)
 
-    if element_ms is None:
+    if not choose and (settings.budget_at is None or time_left_ms is not None):
+        predicted_ms = np.zeros(len(elements))
+    elif element_ms is None:
         predicted_ms = model.predict_element_ms(elements, terms.cost, settings.cost_mode)
     else:
         predicted_ms = np.asarray(element_ms, dtype=np.float64)
@@ -316,7 +320,9 @@ def select(elements: FrameElements, previous_selection=None, settings: Selection
     if settings.mode == "HYBRID":
         eligible &= terms.within_area
     selected = np.zeros(n, dtype=bool)
-    if settings.mode == "HYBRID":
+    if not choose:
+        predicted_trace = 0.0
+    elif settings.mode == "HYBRID":
         nodes = np.flatnonzero(eligible)
         graph = SelectionGraph(nodes, predicted_ms[nodes], terms.relevance[nodes], settings.order)
         # The elements share what is left of T after the fixed part.

@@ -512,3 +512,15 @@ def test_no_nan_or_inf_anywhere_even_from_extreme_input(scene, data, budget, wei
         assert all(np.isfinite(value) for value in row.values() if isinstance(value, float))
     margin = hysteresis_margin(result)
     assert np.all(np.isfinite(margin)) and np.all(margin >= 0)
+
+
+def test_without_choosing_the_terms_and_t_are_the_same_and_nothing_is_selected():
+    """``choose=False`` (the BENEFIT selection chooses its items itself): the paper's terms and T as
+    when it chooses, no element's ms predicted, nothing selected, the graph not run."""
+    elements = frame(4, area_px=np.array([10, 40, 5, 20]))
+    chosen = select(elements, None, hybrid(budget_ms=30.0), quick_model())
+    terms_only = select(elements, None, hybrid(budget_ms=30.0), quick_model(), choose=False)
+    assert chosen.selected.any() and not terms_only.selected.any()
+    assert terms_only.time_left_ms == chosen.time_left_ms and terms_only.predicted_trace_ms == 0.0
+    assert np.array_equal(terms_only.R, chosen.R) and np.array_equal(terms_only.V, chosen.V)
+    assert not terms_only.predicted_ms.any() and all_finite(terms_only)
