@@ -15,8 +15,11 @@ oracle's subset for the same budget (``oracle/regret.csv``):
 - ``own_time_additive``: the same share reached by the best subset (the oracle's knapsack on its
   measurements) within the time the run itself kept for tracing on each frame (its ``time_left_ms``)
   rather than the budget's nominal time: what a perfect choice could have captured in the run's
-  time.  It splits a run's shortfall in two: below it, the choice; between it and 1, the time
-  (the raster half's noise, the selection's own bookkeeping, a slower machine state);
+  time (None when a judged frame did not record its time left).  It splits a run's shortfall in
+  two: below it, the choice; its own shortfall from 1, the time (the raster half's noise, the
+  selection's own bookkeeping, a slower machine state; above 1, a run that had more time than the
+  nominal one).  Under ``BENEFIT`` the time left is the paper's T, before the aim and the margin
+  the knapsack then applies;
 - ``over_capacity_frames`` and ``mean_cost_share``: frames whose choice costs,
   by the oracle's measurements, more than the budget's nominal time for
   tracing, and the mean measured cost / that time;
@@ -94,8 +97,11 @@ def rescore_run(run_dir, rows, frames) -> dict:
         chosen.append(frame.flip_raster - benefit)
         best.append(frame.flip_raster - oracle_benefit)
         own_ms = row.get("time_left_ms")
-        own_ms = float(own_ms) if own_ms is not None and np.isfinite(own_ms) else 0.0
-        in_own_time.append(frame.flip_raster - frame.totals(frame.choose(own_ms))[1])
+        if own_ms is None or np.isnan(own_ms):
+            in_own_time.append(None)  # not recorded: the own-time share is not given
+        else:  # unlimited time: every candidate
+            own_ms = min(float(own_ms), float(np.sum(frame.cost_ms)) + frame.overhead_ms)
+            in_own_time.append(frame.flip_raster - frame.totals(frame.choose(own_ms))[1])
         capacity = row["capacity_ms"] or 0.0
         over += int(cost > capacity + 1e-9)
         if capacity > 0:
@@ -109,11 +115,12 @@ def rescore_run(run_dir, rows, frames) -> dict:
                 estimates.append(float(item["benefit"]))
                 truths.append(measured[str(item["element"])])
     result = captured.measure(raster, chosen, best)
-    own_time = captured.measure(raster, in_own_time, best)
+    own_time = captured.measure(raster, in_own_time, best) if all(value is not None for value in in_own_time) \
+        else None
     return {"run": Path(run_dir).name, "budget_ms": rows[0]["budget_ms"] if rows else None,
             "judged_frames": result.judged_frames, "captured_additive": result.share,
             "captured_additive_lo": result.low, "captured_additive_hi": result.high,
-            "own_time_additive": own_time.share,
+            "own_time_additive": own_time.share if own_time is not None else None,
             "over_capacity_frames": over, "mean_cost_share": float(np.mean(costs)) if costs else None,
             "median_predicted_over_measured": float(np.median(ratios)) if ratios else None,
             "benefit_rank_correlation": spearman(estimates, truths)}

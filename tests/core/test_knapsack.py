@@ -122,31 +122,47 @@ grouped_instances = st.integers(1, 8).flatmap(lambda n: st.tuples(
     st.floats(0.0, 60.0)))
 
 
+def programme_and_enumeration(solve) -> list:
+    """``solve()``'s answers by the binned programme (ENUMERATE_LIMIT 0) and as it is (a few
+    useful items: the enumeration), so both paths stay tested on small instances."""
+    limit = knapsack.ENUMERATE_LIMIT
+    try:
+        knapsack.ENUMERATE_LIMIT = 0
+        programme = solve()
+    finally:
+        knapsack.ENUMERATE_LIMIT = limit
+    return [programme, solve()]
+
+
 @settings(max_examples=300, deadline=None)
 @given(grouped_instances)
 def test_grouped_never_over_capacity_and_optimal_within_the_rounding(instance):
     """A group's cost (an effect's fixed work) is paid once when any of its items is chosen."""
     values, costs, groups, group_costs, capacity = (np.array(instance[0]), np.array(instance[1]),
                                                     np.array(instance[2]), np.array(instance[3]), instance[4])
-    chosen = knapsack.solve_grouped(values, costs, groups, group_costs, capacity)
-    spent = costs[chosen].sum() + group_costs[np.unique(groups[chosen])].sum()
-    assert spent <= capacity * (1 + 1e-8)
     optimum = grouped_brute_force(values, costs, groups, group_costs, capacity)
     # Each chosen item and each opened group loses at most one bin to the rounding.
     n_bins = knapsack.bins_for(len(values) + len(group_costs))
     shrunk = grouped_brute_force(values, costs, groups, group_costs,
                                  capacity * (1.0 - (len(values) + len(group_costs)) / n_bins))
-    assert optimum + 1e-9 >= values[chosen].sum() >= shrunk - 1e-9
+    for chosen in programme_and_enumeration(lambda: knapsack.solve_grouped(values, costs, groups, group_costs,
+                                                                           capacity)):
+        spent = costs[chosen].sum() + group_costs[np.unique(groups[chosen])].sum()
+        assert spent <= capacity * (1 + 1e-8)
+        assert optimum + 1e-9 >= values[chosen].sum() >= shrunk - 1e-9
 
 
 def test_grouped_leaves_a_group_whose_fixed_cost_buys_less_than_another():
     """Two cheap shadow items behind a 4 ms fixed part against one reflection item with none:
     5 ms of time buys the reflection (4 + 2 x 0.6 > 5 leaves the shadows out)."""
     values, costs, groups = np.array([3.0, 3.0, 4.0]), np.array([0.6, 0.6, 4.5]), np.array([0, 0, 1])
-    chosen = knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 5.0)
-    assert chosen.tolist() == [False, False, True]
+    for chosen in programme_and_enumeration(
+            lambda: knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 5.0)):
+        assert chosen.tolist() == [False, False, True]
     # With 6 ms both shadow items fit behind their fixed part (6 > 4 + 1.2) and are worth more.
-    assert knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 6.0).tolist() == [True, True, False]
+    for chosen in programme_and_enumeration(
+            lambda: knapsack.solve_grouped(values, costs, groups, np.array([4.0, 0.0, 0.0]), 6.0)):
+        assert chosen.tolist() == [True, True, False]
 
 
 def grouped_choices_brute_force(values, costs, groups, group_costs, capacity):
@@ -206,8 +222,14 @@ def test_beyond_the_exact_limit_groups_are_paid_only_when_they_buy_something():
 
 def test_grouped_takes_free_items_with_no_time_left_beyond_the_exact_limit():
     """T = 0: items of cost 0 in a group of cost 0 are free (hypothesis found the fallback missing them)."""
-    assert knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [0.0, 0.0, 0.0], 0.0).tolist() == [True, True]
-    assert knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [1.0, 0.0, 0.0], 0.0).tolist() == [False, False]
+    for chosen in programme_and_enumeration(
+            lambda: knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [0.0, 0.0, 0.0], 0.0)):
+        assert chosen.tolist() == [True, True]
+    for chosen in programme_and_enumeration(
+            lambda: knapsack.solve_grouped([1.0, 1.0], [0.0, 0.0], [0, 0], [1.0, 0.0, 0.0], 0.0)):
+        assert chosen.tolist() == [False, False]
+    # A free item whose value is lost in the sum beside a large one is taken all the same.
+    assert knapsack.solve_grouped([1e-300, 1.0], [0.0, 0.0], [0, 0], [0.0], 0.0).tolist() == [True, True]
 
 
 @settings(max_examples=300, deadline=None)

@@ -87,6 +87,11 @@ def test_rescore_judges_recorded_choices_on_the_oracles_measurements(tmp_path):
     # three (0.045): the time a run kept bounds what any choice of it could capture.
     assert by_run["best"]["own_time_additive"] == pytest.approx(0.5)
     assert by_run["cheap"]["own_time_additive"] == pytest.approx(0.045 / 0.03)
+    # A judged frame without its time left: no own-time share rather than 0 ms of it.
+    rows = [dict(row, time_left_ms=None) if row["run"] == "cheap" and row["frame"] == 8 else row for row in rows]
+    oracle.write_results(tmp_path / oracle.ORACLE_DIR, 4, [4, 8], frames, rows, {"best": best, "cheap": cheap})
+    by_run = {row["run"]: row for row in rescore.rescore(tmp_path)[0]}
+    assert by_run["cheap"]["own_time_additive"] is None and by_run["best"]["own_time_additive"] == pytest.approx(0.5)
     assert by_run["best"]["median_predicted_over_measured"] == pytest.approx(5.0 / 11.0)
     assert by_run["cheap"]["median_predicted_over_measured"] is None  # no predicted_ms recorded
     assert by_run["best"]["benefit_rank_correlation"] == pytest.approx(1.0)
