@@ -147,8 +147,7 @@ class FrameRenderer:
             benefit.prior_per_pixel(layers, n_elements, flags["reflections"], flags["refractions"],
                                     flags["shadows"], materials)) if learn_benefit else None
         frame_elements = selection_terms.FrameElements(
-            names=[e.name for e in snapshot.elements],
-            candidate=candidate,
+            names=[e.name for e in snapshot.elements], candidate=candidate,
             area_px=area_px, centre_ndc=centre_ndc, distance=distance,
             priority=np.array([e.priority for e in snapshot.elements], float),
             rt_cost=np.array([e.rt_cost for e in snapshot.elements], float),
@@ -260,9 +259,10 @@ class FrameRenderer:
         if use_benefit and self.frames_rendered > 0 and (traced is None or warm):  # a steady frame, for the aim
             self.benefit_selector.observe_frame(max(total_ms - setup_ms, 0.0), selection.budget_ms,
                                                 traced=traced is not None)
-        # One-time work (Embree builds, shader compiles, uploads, new shadow maps) is not a per-frame cost.
+        # One-time work (Embree builds, shader compiles, uploads, new shadow maps, the first frame's selection:
+        # every mesh's bounds, 80-130 ms on atrium, which held the next frame's T at 0) is not a per-frame cost.
         self.cost_model.observe(FrameStats(
-            raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms,
+            raster_ms=max(raster_ms - raster.setup_ms, 0.0), select_ms=select_ms if self.frames_rendered > 0 else None,
             composite_ms=None if shade_setup_ms > 0 else composite_ms,
             trace_ms=max(trace_ms - upload_ms, 0.0) if traced is not None else None,
             # The layers' read-back, the scene update, the uploads of the results: no effect's.

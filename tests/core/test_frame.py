@@ -350,3 +350,20 @@ def test_id_passes_read_each_pixels_element_and_leave_out_ids_beyond_the_list():
     np.testing.assert_array_equal(passes.selected, [[0, 0, 1, 1], [0, 0, 0, 0]])
     assert {passes.element.dtype, passes.candidate.dtype, passes.selected.dtype} == {np.dtype(np.float32)}
     assert np.isfinite(passes.depth).all()
+
+
+def test_the_first_frames_selection_time_is_not_learned_as_the_stages():
+    """The replay's first frame's select_ms holds one-time work (every mesh's bounds built, first
+    calls): learned, it held the second frame's time left at 0 on atrium.  The select stage keeps
+    its prior after the first frame and learns from the second."""
+    from phrt.phrt_addon.select.cost_model import STAGE_PRIOR_MS
+    snapshot = mirror_scene("HYBRID")
+    renderer = FrameRenderer(threads=1)
+    try:
+        renderer.render(snapshot, ReferenceRaster(snapshot, ray_cast_gbuffer(snapshot)))
+        assert renderer.cost_model.stage_ms()["select"] == pytest.approx(STAGE_PRIOR_MS["select"])
+        second = renderer.render(snapshot, ReferenceRaster(snapshot, ray_cast_gbuffer(snapshot)))
+        assert renderer.cost_model.stage_ms()["select"] != pytest.approx(STAGE_PRIOR_MS["select"])
+        assert second.stats["select_ms"] > 0
+    finally:
+        renderer.close()
