@@ -107,8 +107,9 @@ def owned_change(layers, parts, values, n) -> np.ndarray:
     """(n,) per element, the summed ``values`` (one per frame pixel) of the traced pixels ``parts``
     ((layer name, flat pixels) in order; a pixel in several parts belongs to the last one's
     element there).  Only the traced pixels are looked at, not frame-sized maps of owners (1.5 ms
-    -> 0.4 a measured frame, atrium path1 at 320x240).  Each part's pixels are distinct and each layer's ``flat``
-    ascending (``LayerPixels``: from ``flatnonzero``; traced pixels are some of them)."""
+    -> 0.4 a measured frame, atrium path1 at 320x240).  Each part's pixels are distinct and each
+    layer's ``flat`` ascending (``LayerPixels``: from ``flatnonzero``; traced pixels are some of
+    them)."""
     parts = [(name, np.asarray(where, np.int64)) for name, where in parts if where is not None and len(where)]
     if not parts:
         return np.zeros(n)

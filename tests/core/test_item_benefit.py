@@ -31,27 +31,38 @@ def owners_by_maps(layers, traced, change, n):
     return result
 
 
+HEIGHT, WIDTH, N = 24, 32, 6
+
+
+def random_frame(rng, case):
+    """(layers, traced, change, snapshot) of a random frame: both layers overlap; the transparent
+    layer's reflection on odd cases, a refraction unless the case is a multiple of 3."""
+    layers = {}
+    for name, share in (("opaque", 0.9), ("transparent", 0.3)):
+        flat = np.flatnonzero(rng.random(HEIGHT * WIDTH) < share)
+        layers[name] = SimpleNamespace(flat=flat, element=rng.integers(0, N, len(flat)))
+
+    def pick(name, share):
+        return np.sort(rng.choice(layers[name].flat, int(share * len(layers[name].flat)), replace=False))
+
+    reflection = {"opaque": (pick("opaque", 0.4), None)}
+    if case % 2:
+        reflection["transparent"] = (pick("transparent", 0.5), None)
+    refraction = (pick("transparent", 0.6), None) if case % 3 else None
+    traced = SimpleNamespace(reflection=reflection, refraction=refraction, shadow_visibility={})
+    change = rng.random((HEIGHT, WIDTH, 2)).astype(np.float32)
+    snapshot = SimpleNamespace(elements=[SimpleNamespace(shadows=False)] * N)
+    return layers, traced, change, snapshot
+
+
 def test_the_traced_pixels_sums_equal_the_owner_maps_on_random_frames():
     rng = np.random.default_rng(5)
-    height, width, n = 24, 32, 6
     for case in range(40):
-        layers = {}
-        for name, share in (("opaque", 0.9), ("transparent", 0.3)):
-            flat = np.flatnonzero(rng.random(height * width) < share)
-            layers[name] = SimpleNamespace(flat=flat, element=rng.integers(0, n, len(flat)))
-        pick = (lambda name, share: np.sort(rng.choice(layers[name].flat, int(share * len(layers[name].flat)),
-                                                       replace=False)))
-        reflection = {"opaque": (pick("opaque", 0.4), None)}
-        if case % 2:
-            reflection["transparent"] = (pick("transparent", 0.5), None)
-        refraction = (pick("transparent", 0.6), None) if case % 3 else None
-        traced = SimpleNamespace(reflection=reflection, refraction=refraction, shadow_visibility={})
-        change = rng.random((height, width, 2)).astype(np.float32)
-        chosen = np.ones((n, 3), bool)
+        layers, traced, change, snapshot = random_frame(rng, case)
+        chosen = np.ones((N, 3), bool)
         chosen[:, 0] = False  # no shadows: their sums are benefit.shadow_differences' own
-        snapshot = SimpleNamespace(elements=[SimpleNamespace(shadows=False)] * n)
-        got = item_benefit.measure(snapshot, layers, change, traced, chosen, [None] * n)
-        assert np.allclose(got, owners_by_maps(layers, traced, change, n) * chosen), case
+        got = item_benefit.measure(snapshot, layers, change, traced, chosen, [None] * N)
+        assert np.allclose(got, owners_by_maps(layers, traced, change, N) * chosen), case
 
 
 def test_an_empty_layer_owns_nothing():
@@ -63,29 +74,18 @@ def test_the_error_aware_relevances_sums_equal_the_owner_maps_too():
     """benefit.measure_differences (the `error` relevance): one sum per element, the transparent
     layer's reflection then its refraction owning a pixel over the opaque layer's reflection."""
     rng = np.random.default_rng(9)
-    height, width, n = 24, 32, 6
     for case in range(30):
-        layers = {}
-        for name, share in (("opaque", 0.9), ("transparent", 0.3)):
-            flat = np.flatnonzero(rng.random(height * width) < share)
-            layers[name] = SimpleNamespace(flat=flat, element=rng.integers(0, n, len(flat)))
-        reflection = {name: (np.sort(rng.choice(layers[name].flat, len(layers[name].flat) // 2, replace=False)), None)
-                      for name in ("opaque", "transparent")[:1 + case % 2]}
-        refraction = (np.sort(rng.choice(layers["transparent"].flat, len(layers["transparent"].flat) // 3,
-                                         replace=False)), None) if case % 3 else None
-        traced = SimpleNamespace(reflection=reflection, refraction=refraction, shadow_visibility={})
-        change = rng.random((height, width, 2)).astype(np.float32)
+        layers, traced, change, snapshot = random_frame(rng, case)
         flat_change = change.reshape(-1, 2)
-        owner = np.full(height * width, -1, np.int64)
+        owner = np.full(HEIGHT * WIDTH, -1, np.int64)
         for name in ("opaque", "transparent"):
-            element_at = np.full(height * width, -1, np.int64)
+            element_at = np.full(HEIGHT * WIDTH, -1, np.int64)
             element_at[layers[name].flat] = layers[name].element
-            wheres = ([reflection[name][0]] if name in reflection else []) + \
-                ([refraction[0]] if name == "transparent" and refraction is not None else [])
+            wheres = ([traced.reflection[name][0]] if name in traced.reflection else []) + \
+                ([traced.refraction[0]] if name == "transparent" and traced.refraction is not None else [])
             for where in wheres:
                 owner[where] = element_at[where]
         mine = owner >= 0
-        expected = np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=n)
-        snapshot = SimpleNamespace(elements=[SimpleNamespace(shadows=False)] * n)
-        got = benefit.measure_differences(snapshot, layers, change, traced, np.zeros(n, bool), [None] * n)
+        expected = np.bincount(owner[mine], weights=flat_change[mine, 0], minlength=N)
+        got = benefit.measure_differences(snapshot, layers, change, traced, np.zeros(N, bool), [None] * N)
         assert np.allclose(got, expected), case
