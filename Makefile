@@ -11,8 +11,8 @@ STAMP := $(VENV)/.phrt-installed
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -r requirements.txt
+	tools/pip_install $(PY) -q --upgrade pip
+	tools/pip_install $(PY) -q -r requirements.txt
 	$(PY) -m pip install -q --no-deps -e .
 	@touch $(STAMP)
 
@@ -105,10 +105,10 @@ COMPAT_NUMPY_5.2 := 2.5.5
 	if [ -x $(@D)/bin/python ] && ! $(@D)/bin/python -c 'import sys; sys.exit(sys.version_info[:2] != ($(subst .,$(comma),$(COMPAT_PYTHON_$*))))'; then \
 		echo "$(@D) was made by another Python: making it anew with $$python"; rm -rf $(@D); fi; \
 	test -x $(@D)/bin/python || { echo "$$python -m venv $(@D)"; "$$python" -m venv $(@D); }
-	$(@D)/bin/python -m pip install -q --upgrade pip
+	tools/pip_install $(@D)/bin/python -q --upgrade pip
 	sed -e 's/^bpy==.*/bpy==$(COMPAT_BPY_$*)/' -e 's/^numpy==.*/numpy==$(COMPAT_NUMPY_$*)/' requirements.txt \
 		> $(@D)/requirements.txt
-	$(@D)/bin/python -m pip install -q -r $(@D)/requirements.txt
+	tools/pip_install $(@D)/bin/python -q -r $(@D)/requirements.txt
 	$(@D)/bin/python -m pip install -q --no-deps -e .
 	@touch $@
 
