@@ -260,7 +260,7 @@ def command_sweep(args):
     try:
         plan = plan_module.build_plan(scene_ref, label, camera.name, frame_range, resolution, fractions, variants,
                                       oracle_every=args.oracle_every or oracle_module.DEFAULT_EVERY,
-                                      selection=args.selection)
+                                      selection=args.selection, group_raster=args.lockstep)
     except plan_module.PlanError as error:
         raise UserError(str(error)) from None
     if args.lockstep:

@@ -15,7 +15,11 @@ Each run is the very replay ``phrt sweep`` makes otherwise (``ReplayRun`` with t
 its own frame renderer, cost model and logs, its folder written under a temporary name and
 published when complete); what they share is the scene and the GPU's static geometry (uploaded
 once for all of them).  The raster and raytrace runs (where a budget at F finds its milliseconds)
-run before, the oracle after, as in a plain sweep; ``speed_vs_raster`` in ``sweep.csv`` says how
+run before, the oracle after, as in a plain sweep.  A second raster run (``plan.GROUP_RASTER``) is
+rendered in the group: the oracle's shared time (its budget minus what every variant spends on the
+raster half and the composite) comes from it, measured on the machine the hybrid runs met, not
+minutes before (eval-17: the group's raster half 2.7-8.8 ms slower than the first raster run's on two
+paths, 0.5-2.4 ms faster on the others, against 6-48 ms of time for tracing); ``speed_vs_raster`` in ``sweep.csv`` says how
 far the machine drifted between the raster run and the hybrid runs, the same for all of them, and
 ``summary.json``'s ``lockstep_runs`` (``sweep.csv``'s column of that name) how many runs a run was
 rendered together with (absent: one after the other; a run redone alone later has 1).
@@ -45,8 +49,8 @@ def execute_group(plan_path, job_ids, on_frame=None) -> list:
     begin = time.perf_counter()
     plan = plan_module.read_plan(plan_path)
     jobs = [plan.job(plan_module.check_job_id(job_id)) for job_id in job_ids]
-    if len({plan.target(job) for job in jobs}) > 1 or any(job.kind != "run" or job.mode != "HYBRID" for job in jobs):
-        raise ValueError("a lockstep group is the hybrid runs of one path")
+    if len({plan.target(job) for job in jobs}) > 1 or not all(plan_module.in_lockstep_group(job) for job in jobs):
+        raise ValueError("a lockstep group is the hybrid runs of one path (and its group's raster run)")
     outcomes, todo = {}, []
     try:
         for job in jobs:
@@ -210,10 +214,11 @@ class LockstepExecutor:
             if missing:
                 record(plan_module.JobOutcome(job.id, "failed", message=f"not run: {', '.join(missing)} failed"))
                 continue
-            if job.kind == "run" and job.mode == "HYBRID":
-                # The hybrid runs of this path whose dependencies are all handled, none failed.
-                group = [other for other in order if other.id not in handled and other.kind == "run"
-                         and other.mode == "HYBRID" and plan.target(other) == plan.target(job)
+            if plan_module.in_lockstep_group(job):
+                # The hybrid runs of this path (and its group's raster run) whose dependencies are
+                # all handled, none failed.
+                group = [other for other in order if other.id not in handled
+                         and plan_module.in_lockstep_group(other) and plan.target(other) == plan.target(job)
                          and all(dependency in handled and dependency not in failed
                                  for dependency in other.depends_on)]
                 begin = time.perf_counter()

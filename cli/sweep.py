@@ -152,8 +152,10 @@ def _run(plan, folder, job, scene, camera, partial) -> str:
                    if plan.job(dependency).mode == "HYBRID"}
         reference = next(folder / dependency for dependency in job.depends_on
                          if plan.job(dependency).mode == "RAYTRACE")
-        raster = next((folder / dependency for dependency in job.depends_on
-                       if plan.job(dependency).mode == "RASTER"), None)
+        # The shared time from the raster run rendered with the hybrid runs (lockstep), else the first.
+        rasters = [plan.job(dependency) for dependency in job.depends_on if plan.job(dependency).mode == "RASTER"]
+        rasters.sort(key=lambda raster_job: not plan_module.is_group_raster(raster_job))
+        raster = folder / rasters[0].id if rasters else None
         info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, raster_dir=raster,
                                         every=plan.oracle_every, resolution=resolution)
         message = f"{len(info['frames'])} sampled frames, {len(hybrids)} runs"
@@ -182,7 +184,7 @@ def run_plan(plan_path, plan, executor, on_outcome=None):
     from ..phrt_addon import report
     folder = Path(plan_path).parent
     outcomes = executor.run(plan_path, plan, execute_job, on_outcome=on_outcome)
-    complete = [folder / job.id for job in plan.runs if plan_module.run_is_complete(folder / job.id, plan)]
+    complete = [folder / job.id for job in plan.reported_runs if plan_module.run_is_complete(folder / job.id, plan)]
     if not complete:
         return outcomes, None, "no run is complete"
     failures = [(outcome.job_id, outcome.message) for outcome in outcomes if outcome.status == "failed"]

@@ -173,7 +173,8 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
             if on_progress is not None:
                 on_progress(count + 1, len(frames))
     return oracle.write_results(out_dir, every, frames, measured, regret_rows,
-                                {label: run["dir"] for label, run in runs.items()}, capped=capped)
+                                {label: run["dir"] for label, run in runs.items()}, capped=capped,
+                                shared_from=Path(raster_dir).name if raster_dir is not None else None)
 
 
 def _relevance(selection, names) -> list:

@@ -340,8 +340,10 @@ def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set,
             "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
 
 
-def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None):
-    """Write the oracle folder's three files (``oracle.json`` last: it marks completion)."""
+def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_from=None):
+    """Write the oracle folder's three files (``oracle.json`` last: it marks completion).
+    ``shared_from``: the name of the raster run the shared times came from (None: the oracle's own
+    frames with nothing traced)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
@@ -366,10 +368,12 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
         }
     info = run_log.json_ready({
         "every": every, "frames": list(frames), "runs": runs, "capped": capped or {}, "timings": TIMINGS,
+        "shared_from": shared_from,
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "
         "benefit and cost within the budget's nominal time for tracing (budget - the raster run's raster and "
-        "composite ms on that frame), its subset rendered and measured; unweighted by K"})
+        "composite ms on that frame; shared_from names that run: in a lockstep sweep the raster run rendered "
+        "with the hybrid runs), its subset rendered and measured; unweighted by K"})
     atomic.write_text(folder / ORACLE_JSON, json.dumps(info, indent=2, allow_nan=False) + "\n")
     return info

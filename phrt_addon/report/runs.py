@@ -2,7 +2,6 @@
 (``errors.csv``) and the Pareto front.  Part of ``phrt_addon/report`` (its ``__init__`` says what the report holds).
 """
 import csv
-import html
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field

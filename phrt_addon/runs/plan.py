@@ -59,6 +59,10 @@ from . import atomic, lock, work
 PLAN_JSON = "plan.json"
 PLAN_VERSION = 1
 REPORT_DIR = "report"
+# A lockstep sweep's second raster run, rendered in the group with the hybrid runs: what the
+# raster half and composite cost under the machine's state the hybrid runs met (the oracle's shared
+# time).  The first raster run (rendered before, alone) still resolves the budgets.
+GROUP_RASTER = "group"
 DEFAULT_BUDGETS = 5
 
 # The baseline is the paper's heuristic with the engine's measured cost model; each other
@@ -168,6 +172,11 @@ class Plan:
     def runs(self) -> list:
         return [job for job in self.jobs if job.kind == "run"]
 
+    @property
+    def reported_runs(self) -> list:
+        """The runs the report compares (the group's raster run only times the oracle's shared part)."""
+        return [job for job in self.runs if not is_group_raster(job)]
+
     def to_json(self) -> dict:
         return {"version": self.version, "scene": self.scene, "scene_label": self.scene_label, "path": self.path,
                 "frames": list(self.frames), "resolution": list(self.resolution), "budgets": list(self.budgets),
@@ -187,6 +196,15 @@ class Plan:
                    budgets=list(data["budgets"]), oracle_every=int(data["oracle_every"]), jobs=jobs)
 
 
+def is_group_raster(job: Job) -> bool:
+    return job.kind == "run" and job.mode == "RASTER" and job.variant == GROUP_RASTER
+
+
+def in_lockstep_group(job: Job) -> bool:
+    """A job a lockstep sweep renders frame by frame with the others of its path."""
+    return job.kind == "run" and (job.mode == "HYBRID" or is_group_raster(job))
+
+
 def run_id(scene_label: str, path: str, mode: str, budget_at: float | None = None, variant: str | None = None) -> str:
     base = f"{scene_label}-{path}-{mode.lower()}"
     return base if budget_at is None else f"{base}-at{budget_at:.2f}-{variant}"
@@ -194,10 +212,11 @@ def run_id(scene_label: str, path: str, mode: str, budget_at: float | None = Non
 
 def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budgets: Sequence[float],
                variants: Sequence[str] = tuple(VARIANTS), oracle_every: int = oracle.DEFAULT_EVERY,
-               selection: str | None = None) -> Plan:
+               selection: str | None = None, group_raster: bool = False) -> Plan:
     """The jobs of a sweep: raster, raytrace, every (budget, variant) hybrid, then the oracle.
     ``selection`` ('paper' or 'benefit'): the selection of every variant that does not set its
-    own (``benefit`` does), instead of the paper's."""
+    own (``benefit`` does), instead of the paper's.  ``group_raster`` (a lockstep sweep): a second
+    raster run, rendered with the hybrid runs, gives the oracle its shared time."""
     unknown = [name for name in variants if name not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown variants {unknown}: use some of {', '.join(VARIANTS)}")
@@ -220,7 +239,10 @@ def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budg
                             budget_at=float(fraction), variant=name, overrides={**base, **VARIANTS[name]},
                             depends_on=[raster.id, raytrace.id]))
     hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
-    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raster.id, raytrace.id, *hybrids]))
+    if group_raster and hybrids:
+        jobs.append(Job(f"{raster.id}-{GROUP_RASTER}", "run", "RASTER", variant=GROUP_RASTER,
+                        depends_on=[raster.id, raytrace.id]))
+    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[job.id for job in jobs]))
     seen = {}
     for job in jobs:
         check_job_id(job.id)

@@ -5,6 +5,7 @@ import json
 import pytest
 
 from phrt.phrt_addon.select import mode_budgets
+from phrt.phrt_addon.report import oracle
 from phrt.phrt_addon.runs import plan
 from phrt.phrt_addon.runs.run_log import RunLog
 
@@ -34,6 +35,20 @@ def test_plan_has_raster_and_raytrace_then_every_budget_in_every_variant_then_th
     assert all(job.depends_on == ids[:2] for job in hybrids)
     oracle_job = built.jobs[-1]
     assert oracle_job.kind == "oracle" and set(oracle_job.depends_on) == {ids[0], ids[1], *(job.id for job in hybrids)}
+
+
+def test_a_lockstep_plan_renders_a_second_raster_run_in_the_group_for_the_oracle_not_the_report(tmp_path):
+    built = plan.build_plan("arcade", "arcade", "path1", (1, 24), (320, 240), (0.25,), ("measured", "benefit"),
+                            group_raster=True)
+    group = built.job("arcade-path1-raster-group")
+    assert group.mode == "RASTER" and plan.is_group_raster(group) and plan.in_lockstep_group(group)
+    assert group.depends_on == ["arcade-path1-raster", "arcade-path1-raytrace"]  # after the budgets' references
+    assert not plan.is_group_raster(built.job("arcade-path1-raster"))
+    assert not plan.in_lockstep_group(built.job("arcade-path1-raster"))
+    assert group.id in built.job(oracle.ORACLE_DIR).depends_on
+    assert group not in built.reported_runs and len(built.reported_runs) == len(built.runs) - 1 == 4
+    assert plan.read_plan(plan.write_plan(built, tmp_path)).job(group.id) == group
+    assert "arcade-path1-raster-group" not in [job.id for job in sweep_plan().jobs]  # a plain sweep: none
 
 
 def test_plan_json_round_trips(tmp_path):

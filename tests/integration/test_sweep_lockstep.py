@@ -5,6 +5,7 @@ executor's order on a plan whose jobs are stand-ins (no rendering)."""
 from __future__ import annotations
 
 import csv
+import json
 import os
 import shutil
 import tempfile
@@ -24,6 +25,7 @@ SWEEP = ["--frames", "1-4", "--budget-at", "0.25,0.75", "--variants", "measured,
          "--oracle-every", "2", "--lockstep", "--out", "sw"]
 HYBRIDS = [f"showcase-Camera-hybrid-at{fraction}-{variant}" for fraction in ("0.25", "0.75")
            for variant in ("measured", "benefit")]
+GROUP_RASTER = "showcase-Camera-raster-group"
 
 
 @pytest.fixture(scope="module")
@@ -48,12 +50,13 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
     folder, (status, stdout, errors, written), _, _ = sweeps
     assert status == 0, errors
     lines = job_lines(stdout)
-    assert set(lines) == {"showcase-Camera-raster", "showcase-Camera-raytrace", *HYBRIDS, "oracle"}
+    assert set(lines) == {"showcase-Camera-raster", "showcase-Camera-raytrace", *HYBRIDS, GROUP_RASTER, "oracle"}
     for run in HYBRIDS:
-        assert lines[run].startswith("done") and "4 frames in lockstep with 3 other runs" in lines[run], lines[run]
+        assert lines[run].startswith("done") and "4 frames in lockstep with 4 other runs" in lines[run], lines[run]
         summary = run_files.read_summary(folder / run)
         assert summary["frame_count"] == 4 and summary["budget_source"]["method"] == "runs"
-        assert summary["lockstep_runs"] == (1 if run == HYBRIDS[1] else 4)  # HYBRIDS[1]: redone alone below
+        assert summary["lockstep_runs"] == (1 if run == HYBRIDS[1] else 5)  # HYBRIDS[1]: redone alone below
+    assert "4 frames in lockstep with 4 other runs" in lines[GROUP_RASTER]
     # Every run wrote frame f before any wrote frame f + 1: the images in the order they were written
     # go 1, 1, 1, 1, 2, 2... (one run after the other would go 1, 2, 3, 4, 1, 2...).
     assert written == [frame for frame in range(1, 5) for _ in HYBRIDS]
@@ -62,8 +65,29 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
         rows = {row["run"]: row for row in csv.DictReader(handle)}
     for run in HYBRIDS:  # the drift against the raster run is reported, and the oracle judged each run
         assert float(rows[run]["speed_vs_raster"]) > 0 and int(rows[run]["judged_frames"]) == 2, rows[run]
-        assert rows[run]["lockstep_runs"] == ("1" if run == HYBRIDS[1] else "4")
-    assert rows["showcase-Camera-raster"]["lockstep_runs"] == ""
+        assert rows[run]["lockstep_runs"] == ("1" if run == HYBRIDS[1] else "5")
+    assert rows["showcase-Camera-raster"]["lockstep_runs"] == "" and GROUP_RASTER not in rows
+
+
+def test_the_oracles_shared_time_is_the_group_raster_runs(sweeps):
+    """The budget's nominal time for tracing: budget minus the raster half and composite of the raster
+    run rendered with the hybrid runs (the first raster run's only in a plain sweep)."""
+    folder = sweeps[0]
+    info = json.loads((folder / "oracle" / "oracle.json").read_text())
+    assert info["shared_from"] == GROUP_RASTER
+    group = {row["frame"]: row for row in run_files.read_frames(folder / GROUP_RASTER)}
+    first = {row["frame"]: row for row in run_files.read_frames(folder / "showcase-Camera-raster")}
+    with open(folder / "oracle" / "regret.csv", newline="") as handle:
+        regret = list(csv.DictReader(handle))
+    steady = [row for row in regret if int(row["frame"]) > 1]
+    assert steady
+    for row in steady:
+        frame = int(row["frame"])
+        assert float(row["shared_ms"]) == pytest.approx(group[frame]["raster_ms"] + group[frame]["composite_ms"],
+                                                        rel=1e-4)
+    # Two renders of one frame never take the same microseconds: the first run's would show here.
+    assert any(abs(float(row["shared_ms"]) - first[int(row["frame"])]["raster_ms"]
+                   - first[int(row["frame"])]["composite_ms"]) > 1e-3 for row in steady)
 
 
 def test_a_lockstep_sweep_run_again_skips_complete_runs_and_redoes_a_missing_one(sweeps):
@@ -92,7 +116,9 @@ def plan_of(targets=("path1",)):
                  plan_module.Job(raytrace, "run", mode="RAYTRACE", path=path)]
         jobs += [plan_module.Job(f"s-{path}-hybrid-{index}", "run", mode="HYBRID", budget_at=0.5, path=path,
                                  depends_on=[raster, raytrace]) for index in range(3)]
-    hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
+        jobs.append(plan_module.Job(f"{raster}-group", "run", mode="RASTER", variant=plan_module.GROUP_RASTER,
+                                    path=path, depends_on=[raster, raytrace]))
+    hybrids = [job.id for job in jobs if plan_module.in_lockstep_group(job)]  # each path's 3 hybrids, its group raster
     jobs.append(plan_module.Job("oracle", "oracle", depends_on=[job.id for job in jobs]))
     return plan_module.Plan(scene="s", scene_label="s", path=targets[0], frames=[1, 2], resolution=[8, 8],
                             budgets=[0.5], oracle_every=2, jobs=jobs), hybrids
@@ -115,9 +141,10 @@ def test_the_executor_runs_each_paths_hybrid_runs_as_one_group_after_their_refer
     executor = lockstep.LockstepExecutor(group)
     executor.on_frame = lambda done, total, runs: frames.append((done, total, runs))
     outcomes = executor.run("plan.json", plan, execute, on_outcome=seen.append)
-    assert frames == [(2, 2, 3), (2, 2, 3)]
-    assert calls == ["s-path1-raster", "s-path1-raytrace", tuple(hybrids[:3]),
-                     "s-path2-raster", "s-path2-raytrace", tuple(hybrids[3:]), "oracle"]
+    assert frames == [(2, 2, 4), (2, 2, 4)]
+    assert calls == ["s-path1-raster", "s-path1-raytrace", tuple(hybrids[:4]),
+                     "s-path2-raster", "s-path2-raytrace", tuple(hybrids[4:]), "oracle"]
+    assert hybrids[3] == "s-path1-raster-group"  # the group's raster run renders with the hybrid runs
     assert [outcome.job_id for outcome in outcomes] == [outcome.job_id for outcome in seen]
     assert sorted(outcome.job_id for outcome in outcomes) == sorted(job.id for job in plan.jobs)
 
@@ -133,9 +160,9 @@ def test_a_failed_reference_or_group_fails_its_runs_and_the_rest_goes_on():
 
     outcomes = {outcome.job_id: outcome for outcome in lockstep.LockstepExecutor(group).run("p", plan, execute)}
     assert all(outcomes[run].status == "failed" and "s-path1-raytrace failed" in outcomes[run].message
-               for run in hybrids[:3])
+               for run in hybrids[:4])
     assert all(outcomes[run].status == "failed" and "the GPU went away" in outcomes[run].message
-               for run in hybrids[3:])
+               for run in hybrids[4:])
     assert outcomes["s-path2-raster"].status == "done" and outcomes["oracle"].status == "failed"
 
 
