@@ -37,7 +37,7 @@ DEFAULT_BUDGETS = "0.1,0.25,0.5,0.75,0.9"
 DEFAULT_VARIANTS = "measured,error,benefit,tiers"
 COLUMNS = ("path", "variant", "budget_at", "budget_ms", "captured", "captured_lo", "captured_hi", "judged_frames",
            "popping", "item_popping", "flips_per_100", "max_flips_10", "p95_over_budget", "raster_p95_over_budget", "within_budget", "flip", "mean_ms",
-           "first_frame_ms", "speed_vs_raster", "time_left_share")
+           "first_frame_ms", "speed_vs_raster", "time_left_share", "oracle_reduction")
 ORBIT_RADIUS = 9.0
 ORBIT_HEIGHT = 3.5
 
@@ -188,11 +188,15 @@ def _number(text, spec):
     return "–" if text in ("", None) else format(float(text), spec)
 
 
+def _percent(text):
+    return "–" if text in ("", None) else f"{100 * float(text):.1f}%"
+
+
 def markdown(table) -> str:
     lines = ["| Path | Variant | Budget at | Budget ms | Captured [90%] | Judged | LDR-FLIP | Popping / 100 frames "
              "| of which items | Flips / 100 frames | Max flips in 10 frames | p95 / budget | raster p95 / budget | Within budget "
-             "| G-buffer ms / raster run's | T / oracle's capacity |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| G-buffer ms / raster run's | T / oracle's capacity | Oracle removes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in table:
         interval = (f" [{_number(row['captured_lo'], '.2f')}, {_number(row['captured_hi'], '.2f')}]"
                     if row["captured_lo"] not in ("", None) else "")
@@ -204,7 +208,7 @@ def markdown(table) -> str:
                      f"{row.get('max_flips_10', '')} | "
                      f"{_number(row['p95_over_budget'], '.2f')} | {_number(row.get('raster_p95_over_budget'), '.2f')} | "
                      f"{within} | {_number(row.get('speed_vs_raster'), '.2f')} | "
-                     f"{_number(row.get('time_left_share'), '.2f')} |")
+                     f"{_number(row.get('time_left_share'), '.2f')} | {_percent(row.get('oracle_reduction'))} |")
     return "\n".join(lines) + "\n"
 
 

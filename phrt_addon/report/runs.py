@@ -33,7 +33,7 @@ SWEEP_COLUMNS = ("run", "mode", "cost_mode", "budget_ms", "mean_ms", "p95_ms", "
                  "selection_order", "relevance", "frames", "mean_selected", "regret_frames", "regret_share",
                  "captured", "captured_lo", "captured_hi", "judged_frames", "min_regret", "beat_oracle",
                  "p95_over_budget", "within_budget", "first_frame_ms", "variant_name", "speed_vs_raster",
-                 "time_left_share", "lockstep_runs")
+                 "time_left_share", "lockstep_runs", "oracle_reduction")
 
 
 # The paper's Table II (ms per frame: raster, hybrid, ray tracing) and which of its

@@ -72,6 +72,9 @@ class RunRegret:
     # The run's own T over the oracle's capacity, summed over the judged frames: how much of the
     # budget's nominal time for tracing the run still had after its bookkeeping and the machine's drift.
     time_left_share: float | None = None
+    # 1 - the oracle's LDR-FLIP summed over the judged frames / the raster frame's: how much of the
+    # frame's error the budget can remove at all (a few percent: captured is a ratio of small differences).
+    oracle_reduction: float | None = None
     judged_errors: dict = field(default_factory=dict)  # frame -> (raster, run, oracle) LDR-FLIP
     judged: Captured = field(default_factory=Captured)  # the captured share over the judged frames
     oracle_only: dict = field(default_factory=dict)
@@ -115,10 +118,19 @@ def run_regrets(runs, results):
             overran=sum(1 for row in rows if row["capacity_ms"] is not None and row["heuristic_cost_ms"] is not None
                         and row["heuristic_cost_ms"] > row["capacity_ms"] + 1e-9),
             lost_share=None if share.share is None else 1.0 - share.share,
-            time_left_share=time_left_share(rows),
+            time_left_share=time_left_share(rows), oracle_reduction=oracle_reduction(rows),
             judged_errors={row["frame"]: (row["raster_flip"], row["heuristic_flip"], row["oracle_flip"]) for row in rows},
             oracle_only=oracle_only, heuristic_only=heuristic_only, judged=share)
     return regrets
+
+
+def oracle_reduction(rows) -> float | None:
+    """1 - sum of the oracle's LDR-FLIP / sum of the raster frame's over ``rows`` (regret rows); None
+    without raster error."""
+    raster = float(np.sum([row["raster_flip"] for row in rows]))
+    if not raster > 0.0:
+        return None
+    return 1.0 - float(np.sum([row["oracle_flip"] for row in rows])) / raster
 
 
 def time_left_share(rows) -> float | None:
@@ -184,6 +196,7 @@ def sweep_rows(runs, errors, regrets, pops, references):
             if raster is not None and raster is not run else None,
             "time_left_share": regret.time_left_share if regret is not None else None,
             "lockstep_runs": run.summary.get("lockstep_runs"),
+            "oracle_reduction": regret.oracle_reduction if regret is not None else None,
             # Not a column: the judged frames' errors, for the paired verdicts (results.verdicts).
             "judged_errors": regret.judged_errors if regret is not None else None,
         })

@@ -110,6 +110,8 @@ def test_sweep_csv_has_the_contract_columns_and_one_row_per_run(sweep):
     assert float(hybrid["time_left_share"]) == pytest.approx(1.0)  # T 5 ms against 40 - 35
     raster = next(row for row in rows if row["mode"] == "RASTER")
     assert raster["speed_vs_raster"] == "" and raster["time_left_share"] == ""
+    # The oracle's 0.01 against the raster frame's 0.06: it removes 5/6 of the frame's error.
+    assert float(hybrid["oracle_reduction"]) == pytest.approx(5.0 / 6.0) and raster["oracle_reduction"] == ""
     assert hybrid["lockstep_runs"] == ""  # one run after the other
     assert raster["budget_ms"] == "" and raster["regret"] == "" and float(raster["flip"]) > float(hybrid["flip"])
 
