@@ -59,3 +59,22 @@ def test_the_paired_table_compares_variants_on_the_same_judged_frames(monkeypatc
     assert pair["difference"] > 0 and pair["difference_lo"] > 0 and pair["verdict"] == "benefit captures more"
     assert "| atrium/path2 | 0.50 | benefit - measured | +0.3" in selection_eval.paired_markdown([pair])
     sys.modules.pop("selection_eval", None)
+
+
+def test_the_raster_floor_comes_from_the_raster_run_rendered_with_the_hybrid_runs(monkeypatch, tmp_path):
+    """The p95 floor of the table: the group raster run's steady p95 (its first frame left out)."""
+    monkeypatch.syspath_prepend(str(TOOLS))
+    import selection_eval
+    from phrt.phrt_addon.runs.run_log import RunLog
+    sweep = tmp_path / "atrium-path2"
+    assert selection_eval._group_raster_p95(sweep) is None  # none: the caller takes the first raster run's
+    log = RunLog(sweep / "atrium-path2-raster-group")
+    for frame in range(1, 22):
+        log.add_frame({"frame": frame, "mode": "RASTER", "total_ms": 900.0 if frame == 1 else 30.0 + frame,
+                       "raster_ms": 20.0, "select_ms": 1.0, "trace_ms": 0.0, "composite_ms": 9.0, "budget_ms": 0.0,
+                       "predicted_trace_ms": 0.0, "n_candidates": 0, "n_visible": 0, "n_selected": 0, "rays": 0})
+    log.close({"scene": "atrium", "path": "path2", "resolution": [8, 8], "blender_version": "5.0.1",
+               "embreex_version": "4.4.0.post1"})
+    p95 = selection_eval._group_raster_p95(sweep)
+    assert 30.0 + 20 <= p95 <= 30.0 + 21  # frames 2-21: 32..51 ms; the first frame's 900 is one-time work
+    sys.modules.pop("selection_eval", None)
