@@ -21,7 +21,8 @@ raster half and the composite) comes from it, measured on the machine the hybrid
 minutes before (eval-17: the group's raster half 2.7-8.8 ms slower than the first raster run's on two
 paths, 0.5-2.4 ms faster on the others, against 6-48 ms of time for tracing); ``speed_vs_raster`` in ``sweep.csv`` says how
 far the machine drifted between the raster run and the hybrid runs, the same for all of them, and
-``summary.json``'s ``lockstep_runs`` (``sweep.csv``'s column of that name) how many runs a run was
+``summary.json``'s ``lockstep_runs`` (``sweep.csv``'s column of that name) how many runs (the group
+raster run included) a run was
 rendered together with (absent: one after the other; a run redone alone later has 1).
 """
 from __future__ import annotations
@@ -129,10 +130,12 @@ def _lockstep(plan, folder, jobs, scene, camera, on_frame=None) -> list:
     runs, opened, results = [], [], [None] * len(jobs)
     try:
         for index, job in enumerate(jobs):
+            facts = {"lockstep_runs": len(jobs)}
+            if plan_module.is_group_raster(job):  # said in its summary: the report never takes it for the raster run
+                facts["group_raster"] = True
             try:
                 runs.append(replay.ReplayRun(scene, camera, frames, job.mode, plan_module.partial_dir(folder, job),
-                                             restores_scene=False, facts={"lockstep_runs": len(jobs)},
-                                             **run_arguments(plan, folder, job)))
+                                             restores_scene=False, facts=facts, **run_arguments(plan, folder, job)))
                 opened.append(index)
             except (camera_path.ReplayError, blender_process.UserError) as error:
                 results[index] = (None, str(error).strip().splitlines()[0])

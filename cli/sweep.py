@@ -123,7 +123,7 @@ def run_arguments(plan, folder, job) -> dict:
                   if plan.job(dependency).mode in ("RASTER", "RAYTRACE")]
     if not references:
         references = [plan_module.run_id(label, path, mode) for mode in ("RASTER", "RAYTRACE")]
-    return {"images": "exr", "resolution": tuple(plan.resolution), "scene_label": label,
+    return {"images": plan_module.run_images(job), "resolution": tuple(plan.resolution), "scene_label": label,
             "budget_at": job.budget_at, "budget_ms": job.budget_ms,
             "budget_search_dirs": [folder / reference for reference in references], "overrides": job.overrides}
 
@@ -153,9 +153,7 @@ def _run(plan, folder, job, scene, camera, partial) -> str:
         reference = next(folder / dependency for dependency in job.depends_on
                          if plan.job(dependency).mode == "RAYTRACE")
         # The shared time from the raster run rendered with the hybrid runs (lockstep), else the first.
-        rasters = [plan.job(dependency) for dependency in job.depends_on if plan.job(dependency).mode == "RASTER"]
-        rasters.sort(key=lambda raster_job: not plan_module.is_group_raster(raster_job))
-        raster = folder / rasters[0].id if rasters else None
+        raster = plan_module.shared_raster(plan, folder, job)
         info = oracle_engine.run_oracle(scene, camera, reference, hybrids, partial, raster_dir=raster,
                                         every=plan.oracle_every, resolution=resolution)
         message = f"{len(info['frames'])} sampled frames, {len(hybrids)} runs"

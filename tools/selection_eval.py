@@ -117,8 +117,10 @@ def evaluate(args) -> list:
         # The raster run's own p95 against each budget: the floor no selection can go below (a
         # frame that traces nothing still costs a raster frame, noise included); from the raster run
         # rendered with the hybrid runs when there is one (lockstep: the machine they met).
-        raster_p95 = _group_raster_p95(sweep_dir) or next(
-            (float(row["p95_ms"]) for row in rows if row["mode"] == "RASTER" and row.get("p95_ms")), None)
+        raster_p95 = _shared_raster_p95(sweep_dir)
+        if raster_p95 is None:
+            raster_p95 = next((float(row["p95_ms"]) for row in rows if row["mode"] == "RASTER" and row.get("p95_ms")),
+                              None)
         for row in rows:
             if row["mode"] != "HYBRID":
                 continue
@@ -129,13 +131,16 @@ def evaluate(args) -> list:
     return table
 
 
-def _group_raster_p95(sweep_dir: Path):
-    """The steady p95 frame ms of the sweep's group raster run (``plan.GROUP_RASTER``), or None."""
-    from phrt.phrt_addon.runs import plan, run_files, steady
-    for folder in sorted(sweep_dir.glob(f"*-raster-{plan.GROUP_RASTER}")):
-        if (folder / "frames.csv").is_file():
-            return steady.steady_stats(run_files.read_frames(folder))["p95"]
-    return None
+def _shared_raster_p95(sweep_dir: Path):
+    """The steady p95 frame ms of the raster run the sweep's oracle took its shared times from
+    (``oracle.json`` ``shared_from``: in lockstep the group raster run), or None."""
+    from phrt.phrt_addon.report import oracle
+    from phrt.phrt_addon.runs import run_files, steady
+    results = oracle.read_results(sweep_dir / oracle.ORACLE_DIR)
+    name = results.info.get("shared_from") if results is not None else None
+    if not name or not results.is_shared_from(sweep_dir / name):
+        return None
+    return steady.steady_stats(run_files.read_frames(sweep_dir / name))["p95"]
 
 
 PAIRS = (("benefit", "measured"), ("tiers", "benefit"))

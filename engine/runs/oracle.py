@@ -174,7 +174,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 on_progress(count + 1, len(frames))
     return oracle.write_results(out_dir, every, frames, measured, regret_rows,
                                 {label: run["dir"] for label, run in runs.items()}, capped=capped,
-                                shared_from=Path(raster_dir).name if raster_dir is not None else None)
+                                shared_dir=raster_dir)
 
 
 def _relevance(selection, names) -> list:

@@ -27,7 +27,10 @@ def build_report(run_dirs, reference=None, out_dir="out/report", oracle_dir=None
             paths.append(Path(run_dir))
     if not paths:
         raise ValueError("no RUN_DIR given")
-    runs = [load_run(path) for path in paths]
+    # A lockstep sweep's group raster run only times the oracle's shared part: never "the raster run".
+    runs = [run for run in (load_run(path) for path in paths) if not run.summary.get("group_raster")]
+    if not runs:
+        raise ValueError("the RUN_DIRs hold only a lockstep sweep's group raster run: give the sweep's runs")
     unique_labels(runs)
     reference_run = None
     if reference is not None:

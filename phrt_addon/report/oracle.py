@@ -302,6 +302,12 @@ class OracleResults:
         entry = self.runs().get(run_label)
         return entry is not None and entry.get("summary_hash") == summary_hash(run_dir)
 
+    def is_shared_from(self, raster_dir) -> bool:
+        """Whether the shared times came from the raster run ``raster_dir`` as it is now."""
+        raster_dir = Path(raster_dir)
+        return self.info.get("shared_from") == raster_dir.name and \
+            self.info.get("shared_summary_hash") == summary_hash(raster_dir)
+
 
 def read_results(folder) -> OracleResults | None:
     """The oracle folder's contents, or None when it has not been (completely) written."""
@@ -340,10 +346,10 @@ def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set,
             "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
 
 
-def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_from=None):
+def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_dir=None):
     """Write the oracle folder's three files (``oracle.json`` last: it marks completion).
-    ``shared_from``: the name of the raster run the shared times came from (None: the oracle's own
-    frames with nothing traced)."""
+    ``shared_dir``: the raster run the shared times came from (None: the oracle's own frames with
+    nothing traced), named in ``shared_from`` with its summary's hash."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
@@ -368,7 +374,8 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
         }
     info = run_log.json_ready({
         "every": every, "frames": list(frames), "runs": runs, "capped": capped or {}, "timings": TIMINGS,
-        "shared_from": shared_from,
+        "shared_from": Path(shared_dir).name if shared_dir is not None else None,
+        "shared_summary_hash": summary_hash(shared_dir) if shared_dir is not None else None,
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "

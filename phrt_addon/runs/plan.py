@@ -37,9 +37,7 @@ runs on the machine that runs the hybrid job: all jobs of a plan should run on
 machines of one kind.
 
 A job may name its own scene and camera path (``make paper`` puts the runs of
-several paths of both scenes in one plan); by default it replays the plan's.
-
-Plain Python, no ``bpy``.
+several paths of both scenes in one plan); by default it replays the plan's.  Plain Python, no ``bpy``.
 """
 from __future__ import annotations
 
@@ -59,9 +57,8 @@ from . import atomic, lock, work
 PLAN_JSON = "plan.json"
 PLAN_VERSION = 1
 REPORT_DIR = "report"
-# A lockstep sweep's second raster run, rendered in the group with the hybrid runs: what the
-# raster half and composite cost under the machine's state the hybrid runs met (the oracle's shared
-# time).  The first raster run (rendered before, alone) still resolves the budgets.
+# A lockstep sweep's second raster run, in the hybrid runs' group: the oracle's shared time on the
+# machine they met (the first raster run, rendered before them, still resolves the budgets).
 GROUP_RASTER = "group"
 DEFAULT_BUDGETS = 5
 
@@ -173,8 +170,7 @@ class Plan:
         return [job for job in self.jobs if job.kind == "run"]
 
     @property
-    def reported_runs(self) -> list:
-        """The runs the report compares (the group's raster run only times the oracle's shared part)."""
+    def reported_runs(self) -> list:  # the group raster run only times the oracle's shared part
         return [job for job in self.runs if not is_group_raster(job)]
 
     def to_json(self) -> dict:
@@ -198,6 +194,22 @@ class Plan:
 
 def is_group_raster(job: Job) -> bool:
     return job.kind == "run" and job.mode == "RASTER" and job.variant == GROUP_RASTER
+
+
+def run_images(job: Job) -> str:
+    """The images a run job writes: EXR frames, but none for the group raster run (only its times are read)."""
+    return "none" if is_group_raster(job) else "exr"
+
+
+def shared_raster(plan: "Plan", folder, oracle_job: Job):
+    """The run folder the oracle takes its shared time from: the group raster run of its path when
+    complete (lockstep), else the first raster run it depends on; None without either."""
+    folder = Path(folder)
+    for job in (job for job in plan.jobs if is_group_raster(job) and plan.target(job) == plan.target(oracle_job)):
+        if run_is_complete(folder / job.id, plan):
+            return folder / job.id
+    first = next((dependency for dependency in oracle_job.depends_on if plan.job(dependency).mode == "RASTER"), None)
+    return folder / first if first is not None else None
 
 
 def in_lockstep_group(job: Job) -> bool:
@@ -239,10 +251,10 @@ def build_plan(scene: str, scene_label: str, path: str, frames, resolution, budg
                             budget_at=float(fraction), variant=name, overrides={**base, **VARIANTS[name]},
                             depends_on=[raster.id, raytrace.id]))
     hybrids = [job.id for job in jobs if job.mode == "HYBRID"]
-    if group_raster and hybrids:
-        jobs.append(Job(f"{raster.id}-{GROUP_RASTER}", "run", "RASTER", variant=GROUP_RASTER,
-                        depends_on=[raster.id, raytrace.id]))
-    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[job.id for job in jobs]))
+    jobs.append(Job(oracle.ORACLE_DIR, "oracle", depends_on=[raster.id, raytrace.id, *hybrids]))
+    if group_raster and hybrids:  # rendered in the hybrid runs' group, before the oracle: not its dependency
+        jobs.insert(len(jobs) - 1, Job(f"{raster.id}-{GROUP_RASTER}", "run", "RASTER", variant=GROUP_RASTER,
+                                       depends_on=[raster.id, raytrace.id]))
     seen = {}
     for job in jobs:
         check_job_id(job.id)
@@ -268,7 +280,7 @@ def read_plan(plan_path) -> Plan:
 
 def wanted_work(plan: Plan, job: Job, scene_file) -> dict:
     """The work a run of ``job`` records when done from ``scene_file`` (the .blend it opens)."""
-    return work.work_record(scene_file, plan.frames, plan.resolution, mode=job.mode, images="exr",
+    return work.work_record(scene_file, plan.frames, plan.resolution, mode=job.mode, images=run_images(job),
                             budget_ms=job.budget_ms, budget_at=job.budget_at, overrides=job.overrides)
 
 
@@ -309,6 +321,9 @@ def job_is_complete(plan: Plan, folder, job: Job, wanted: dict | None = None) ->
     if results is None:
         return False
     runs = [dependency for dependency in job.depends_on if plan.job(dependency).mode == "HYBRID"]
+    raster = shared_raster(plan, folder, job)
+    if raster is not None and not results.is_shared_from(raster):  # redone, or another raster run now
+        return False
     return all(results.is_current_for(run, folder / run) for run in runs)
 
 

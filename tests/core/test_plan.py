@@ -45,10 +45,37 @@ def test_a_lockstep_plan_renders_a_second_raster_run_in_the_group_for_the_oracle
     assert group.depends_on == ["arcade-path1-raster", "arcade-path1-raytrace"]  # after the budgets' references
     assert not plan.is_group_raster(built.job("arcade-path1-raster"))
     assert not plan.in_lockstep_group(built.job("arcade-path1-raster"))
-    assert group.id in built.job(oracle.ORACLE_DIR).depends_on
+    oracle_job = built.job(oracle.ORACLE_DIR)
+    # Not a dependency of the oracle (its failure must not cost the oracle), but before it in the plan.
+    assert group.id not in oracle_job.depends_on
+    assert [job.id for job in built.in_dependency_order()].index(group.id) < len(built.jobs) - 1
     assert group not in built.reported_runs and len(built.reported_runs) == len(built.runs) - 1 == 4
+    assert plan.run_images(group) == "none" and plan.run_images(built.job("arcade-path1-raster")) == "exr"
     assert plan.read_plan(plan.write_plan(built, tmp_path)).job(group.id) == group
     assert "arcade-path1-raster-group" not in [job.id for job in sweep_plan().jobs]  # a plain sweep: none
+    # The oracle's shared time: from the group raster run once it is complete, else the first raster run.
+    assert plan.shared_raster(built, tmp_path, oracle_job) == tmp_path / "arcade-path1-raster"
+    finished_run(tmp_path / group.id, base_ms=30.0)
+    assert plan.shared_raster(built, tmp_path, oracle_job) == tmp_path / group.id
+
+
+def test_an_oracle_is_redone_when_the_raster_run_it_took_its_shared_time_from_changed(tmp_path):
+    built = plan.build_plan("arcade", "arcade", "path1", (1, 24), (320, 240), (0.25,), ("measured",),
+                            group_raster=True)
+    oracle_job, group = built.job(oracle.ORACLE_DIR), built.job("arcade-path1-raster-group")
+    hybrid = next(job for job in built.runs if job.mode == "HYBRID")
+    finished_run(tmp_path / hybrid.id, mode="HYBRID")
+    finished_run(tmp_path / group.id, base_ms=30.0)
+    runs = {hybrid.id: tmp_path / hybrid.id}
+    oracle.write_results(tmp_path / oracle.ORACLE_DIR, 4, [], [], [], runs, shared_dir=tmp_path / group.id)
+    assert plan.job_is_complete(built, tmp_path, oracle_job)
+    finished_run(tmp_path / group.id, base_ms=31.0)  # the group raster run redone: another summary
+    assert not plan.job_is_complete(built, tmp_path, oracle_job)
+    # An oracle written before the group raster run existed (shared from the first raster run) is redone too.
+    oracle.write_results(tmp_path / oracle.ORACLE_DIR, 4, [], [], [], runs, shared_dir=tmp_path / "arcade-path1-raster")
+    assert not plan.job_is_complete(built, tmp_path, oracle_job)
+    oracle.write_results(tmp_path / oracle.ORACLE_DIR, 4, [], [], [], runs, shared_dir=tmp_path / group.id)
+    assert plan.job_is_complete(built, tmp_path, oracle_job)
 
 
 def test_plan_json_round_trips(tmp_path):

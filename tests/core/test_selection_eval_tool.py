@@ -1,6 +1,8 @@
 """``tools/selection_eval.py``: a sweep stopped by a signal stops the evaluation with the sweep's
 exit status (no later path is swept, no table written over the last one)."""
 import sys
+
+import pytest
 from pathlib import Path
 
 TOOLS = Path(__file__).resolve().parents[2] / "tools"
@@ -61,20 +63,28 @@ def test_the_paired_table_compares_variants_on_the_same_judged_frames(monkeypatc
     sys.modules.pop("selection_eval", None)
 
 
-def test_the_raster_floor_comes_from_the_raster_run_rendered_with_the_hybrid_runs(monkeypatch, tmp_path):
-    """The p95 floor of the table: the group raster run's steady p95 (its first frame left out)."""
+def test_the_raster_floor_comes_from_the_raster_run_the_oracle_took_its_shared_time_from(monkeypatch, tmp_path):
+    """The p95 floor of the table: the steady p95 (first frame left out) of the raster run named in
+    oracle.json's shared_from (lockstep: the group raster run), and only while it is that run."""
     monkeypatch.syspath_prepend(str(TOOLS))
+    import numpy as np
     import selection_eval
+    from phrt.phrt_addon.report import oracle
     from phrt.phrt_addon.runs.run_log import RunLog
     sweep = tmp_path / "atrium-path2"
-    assert selection_eval._group_raster_p95(sweep) is None  # none: the caller takes the first raster run's
-    log = RunLog(sweep / "atrium-path2-raster-group")
+    group = sweep / "atrium-path2-raster-group"
+    log = RunLog(group)
     for frame in range(1, 22):
         log.add_frame({"frame": frame, "mode": "RASTER", "total_ms": 900.0 if frame == 1 else 30.0 + frame,
                        "raster_ms": 20.0, "select_ms": 1.0, "trace_ms": 0.0, "composite_ms": 9.0, "budget_ms": 0.0,
                        "predicted_trace_ms": 0.0, "n_candidates": 0, "n_visible": 0, "n_selected": 0, "rays": 0})
     log.close({"scene": "atrium", "path": "path2", "resolution": [8, 8], "blender_version": "5.0.1",
                "embreex_version": "4.4.0.post1"})
-    p95 = selection_eval._group_raster_p95(sweep)
-    assert 30.0 + 20 <= p95 <= 30.0 + 21  # frames 2-21: 32..51 ms; the first frame's 900 is one-time work
+    assert selection_eval._shared_raster_p95(sweep) is None  # no oracle yet: the caller takes the first raster run's
+    oracle.write_results(sweep / oracle.ORACLE_DIR, 4, [], [], [], {}, shared_dir=group)
+    # Frames 2-21: 32..51 ms, p95 50.05; the first frame's 900 ms (one-time work) would make it 51.0.
+    assert selection_eval._shared_raster_p95(sweep) == pytest.approx(float(np.percentile(np.arange(32.0, 52.0), 95)))
+    assert selection_eval._shared_raster_p95(sweep) == pytest.approx(50.05)
+    (group / "summary.json").write_text((group / "summary.json").read_text().replace("atrium", "arcade"))
+    assert selection_eval._shared_raster_p95(sweep) is None  # the run was redone since the oracle: not its floor
     sys.modules.pop("selection_eval", None)

@@ -205,6 +205,9 @@ def test_sweep_with_workers_runs_the_plan_on_a_local_cluster(blend):
     assert [row["run"] for row in read_csv(folder / "report" / "sweep.csv")] == \
         [job["id"] for job in plan["jobs"] if job["kind"] == "run"]
     assert (folder / "oracle" / "oracle.json").is_file() and not list(folder.glob(".*partial*"))
+    # Not in lockstep: no group raster run; the oracle's shared time is the raster run's.
+    assert json.loads((folder / "oracle" / "oracle.json").read_text())["shared_from"] == plan["jobs"][0]["id"]
+    assert plan["jobs"][0]["id"].endswith("-raster")
 
 
 @pytest.mark.parametrize("args, expected", [

@@ -17,6 +17,7 @@ import pytest  # noqa: E402
 
 import phrt  # noqa: E402
 from phrt.cli import lockstep  # noqa: E402
+from phrt.phrt_addon import report  # noqa: E402
 from phrt.phrt_addon.runs import plan as plan_module  # noqa: E402
 from phrt.phrt_addon.runs import run_files  # noqa: E402
 from phrt_render import job_lines, run_phrt, save_moving_showcase  # noqa: E402
@@ -57,6 +58,9 @@ def test_the_hybrid_runs_render_frame_by_frame_together(sweeps):
         assert summary["frame_count"] == 4 and summary["budget_source"]["method"] == "runs"
         assert summary["lockstep_runs"] == (1 if run == HYBRIDS[1] else 5)  # HYBRIDS[1]: redone alone below
     assert "4 frames in lockstep with 4 other runs" in lines[GROUP_RASTER]
+    group = run_files.read_summary(folder / GROUP_RASTER)
+    assert group["group_raster"] is True and group["lockstep_runs"] == 5 and group["mode"] == "RASTER"
+    assert not list((folder / GROUP_RASTER).rglob("*.exr"))  # only its times are read: no images
     # Every run wrote frame f before any wrote frame f + 1: the images in the order they were written
     # go 1, 1, 1, 1, 2, 2... (one run after the other would go 1, 2, 3, 4, 1, 2...).
     assert written == [frame for frame in range(1, 5) for _ in HYBRIDS]
@@ -75,6 +79,9 @@ def test_the_oracles_shared_time_is_the_group_raster_runs(sweeps):
     folder = sweeps[0]
     info = json.loads((folder / "oracle" / "oracle.json").read_text())
     assert info["shared_from"] == GROUP_RASTER
+    # Given to `phrt report` with the sweep's runs, it is never taken for the raster run.
+    with pytest.raises(ValueError, match="group raster"):
+        report.build_report([folder / GROUP_RASTER], out_dir=folder / "group-report")
     group = {row["frame"]: row for row in run_files.read_frames(folder / GROUP_RASTER)}
     first = {row["frame"]: row for row in run_files.read_frames(folder / "showcase-Camera-raster")}
     with open(folder / "oracle" / "regret.csv", newline="") as handle:
