@@ -1,9 +1,11 @@
 """``phrt advise`` as users run it (subprocesses): a short advice of the hand-built scene's path,
 and bad input exiting 2 with one line, as ``phrt render`` does."""
+import csv
 import os
 import subprocess
 import sys
 import tempfile
+from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -14,6 +16,7 @@ import pytest  # noqa: E402
 bpy = pytest.importorskip("bpy")
 
 from advice_scene import advice_scene  # noqa: E402
+from phrt.phrt_addon.advise import recommend  # noqa: E402
 
 PHRT = Path(sys.executable).with_name("phrt")
 
@@ -56,7 +59,20 @@ def test_advise_writes_the_advice_files_into_the_default_folder(results):
     header = (out / "advice.csv").read_text().splitlines()[0]
     assert header.startswith("element,effect,tagged,visible_share,mean_pixels,benefit,cost_ms,benefit_per_ms,"
                              "paper_share,benefit_share,oracle_share,recommendation,reason")
-    assert "per judged frame" in stdout and "tag 1" in stdout
+    assert "per judged frame" in stdout
+    with open(out / "advice.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    # The summary line counts the file's recommendations.
+    counts = Counter(row["recommendation"] for row in rows)
+    assert all(f"{word} {count}" in stdout for word, count in counts.items()), (counts, stdout)
+    # The untagged chrome sphere's reflection removes error (measured on images: no timing in it) and
+    # is told to be tagged exactly when the oracle bought it often enough at some budget.  Whether it
+    # did is a matter of measured milliseconds: on a machine that slows down between the runs that
+    # set the budgets and the oracle's timings it may not (seen once in CI on Blender 5.2).
+    chrome = next(row for row in rows if row["element"] == "ChromeSphere" and row["effect"] == "reflections")
+    assert chrome["tagged"] == "0" and float(chrome["benefit"]) >= recommend.NOISE_FLIP
+    best_share = max(float(chrome[f"oracle_share_{fraction}"]) for fraction in ("0.5", "1"))
+    assert chrome["recommendation"] == ("tag" if best_share >= recommend.TAG_SHARE else "keep"), chrome
 
 
 @pytest.mark.parametrize("name,words", [("missing", "no such file"), ("frames", "malformed frame range"),
