@@ -388,7 +388,7 @@ class FrameRenderer:
         depth: no layer is read back before the selection)."""
         n = len(snapshot.elements)
         footprint = np.zeros(n)
-        points = front_points(snapshot.camera, raster.view_depth, FOOTPRINT_STEP)
+        points = front_points(snapshot.camera, raster.view_depth, FOOTPRINT_STEP, self.pixel_grid)
         if len(points) == 0:
             return footprint
         scale = FOOTPRINT_STEP * FOOTPRINT_STEP

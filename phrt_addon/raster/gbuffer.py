@@ -193,21 +193,27 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     image = np.asarray(element_image)
     if image.dtype.kind not in "iu":
         image = image.astype(np.int64)
-    # One key per pixel: 0 no element (id -1), 1..n the elements, n + 1 any other id.  Negative
-    # ids + 1 seen as unsigned are beyond n + 1, so one minimum clips both ends (in place: one
-    # array of the image's size, not three).
-    key = image.astype(np.int64).ravel()
-    key += 1
-    unsigned = key.view(np.uint64)
-    np.minimum(unsigned, np.uint64(n_elements + 1), out=unsigned)
+    def keys(ids):
+        # One key per id: 0 no element (id -1), 1..n the elements, n + 1 any other id.  Negative
+        # ids + 1 seen as unsigned are beyond n + 1, so one minimum clips both ends (in place).
+        key = ids.astype(np.int64)
+        key += 1
+        unsigned = key.view(np.uint64)
+        np.minimum(unsigned, np.uint64(n_elements + 1), out=unsigned)
+        return key
+
+    ids = image.ravel()
     size = n_elements + 2
     depth_values = np.asarray(view_depth).ravel()
-    if depth_values.size != key.size:
-        raise ValueError(f"view depth has {depth_values.size} values for {key.size} pixels")
-    runs = row_runs(key, width)
-    if runs is not None:  # sums over runs of one id along a row (a coherent image: a few thousand)
+    if depth_values.size != ids.size:
+        raise ValueError(f"view depth has {depth_values.size} values for {ids.size} pixels")
+    # Runs of one id along a row (a coherent image: a few thousand), found on the ids as they are
+    # (two ids beyond n in a row make two runs of one key: summed alike); keys for the runs only.
+    runs = row_runs(ids, width)
+    key = None
+    if runs is not None:
         starts, lengths = runs
-        run_key = key[starts]
+        run_key = keys(ids[starts])
         row, column = np.divmod(starts, width)
         counts = np.bincount(run_key, weights=lengths, minlength=size)[1:n_elements + 1].astype(np.int64)
         # A run's columns are column .. column + length - 1: their sum in closed form (exact in float64).
@@ -217,6 +223,7 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
         depth_sum = np.bincount(run_key, weights=np.add.reduceat(depth_values, starts, dtype=np.float64),
                                 minlength=size)[1:n_elements + 1]
     else:
+        key = keys(ids)
         xs, ys = (grid or PixelGrid()).coordinates(height, width)
         counts = np.bincount(key, minlength=size)[1:n_elements + 1].astype(np.int64, copy=False)
         column_sum = np.bincount(key, weights=xs, minlength=size)[1:n_elements + 1]
@@ -232,6 +239,7 @@ def element_pixel_stats(element_image: np.ndarray, n_elements: int, view_depth: 
     # when an element's sum is not finite (a pixel without a finite depth) are such pixels left out.
     depth_count = counts
     if not np.isfinite(depth_sum).all():
+        key = keys(ids) if key is None else key
         finite = np.isfinite(depth_values)
         depth_sum = np.bincount(key, weights=np.where(finite, depth_values, 0.0), minlength=size)[1:n_elements + 1]
         depth_count = np.bincount(key[finite], minlength=size)[1:n_elements + 1]
@@ -257,11 +265,25 @@ def row_runs(key: np.ndarray, width: int):
 
 class PixelGrid:
     """(column, row) of every pixel in row order, float64 (bincount weights), kept for the last
-    size asked: a replay's frames share it (0.6 ms a frame at 320x240, 3 at 640x480)."""
+    size asked: a replay's frames share it (0.6 ms a frame at 320x240, 3 at 640x480); also the
+    NDC of front_points' sub-sample."""
 
     def __init__(self):
         self._size = None
         self._coordinates = None
+        self._subsample = None  # ((height, width, step), (xs, ys)): front_points' NDC
+
+    def subsample_ndc(self, height: int, width: int, step: int) -> tuple:
+        """(x, y) NDC (-1..1, flat, row order) of the centres of every ``step``-th pixel from
+        ``step // 2`` in x and y (front_points' sub-sample), kept for the last size asked."""
+        if self._subsample is None or self._subsample[0] != (height, width, step):
+            rows = (np.arange(step // 2, height, step) + 0.5) / height * 2.0 - 1.0
+            cols = (np.arange(step // 2, width, step) + 0.5) / width * 2.0 - 1.0
+            ys, xs = np.meshgrid(rows, cols, indexing="ij")
+            xs, ys = xs.ravel(), ys.ravel()
+            xs.flags.writeable = ys.flags.writeable = False
+            self._subsample = ((height, width, step), (xs, ys))
+        return self._subsample[1]
 
     def coordinates(self, height: int, width: int) -> tuple:
         if self._size != (height, width):
@@ -308,22 +330,21 @@ def resolution_problem(width: int, height: int, available: int | None = None) ->
             f"the {available / 2**30:.1f} GiB of memory available: give a smaller --resolution")
 
 
-def front_points(camera, view_depth, step) -> np.ndarray:
+def front_points(camera, view_depth, step, grid=None) -> np.ndarray:
     """World positions (float64) of every ``step``-th pixel in x and y with a surface, from its
     distance along the view axis: on the pixel's ray, interpolated between its near and far
-    points (exact for perspective and orthographic views alike)."""
+    points (exact for perspective and orthographic views alike).  ``grid`` (a ``PixelGrid``,
+    optional) keeps the sub-sample's NDC from frame to frame."""
     height, width = view_depth.shape
-    rows = np.arange(step // 2, height, step)
-    cols = np.arange(step // 2, width, step)
     # The sub-sample first, then to float64 (not the whole image: 1 ms a frame at 320x240).
     depth = np.asarray(view_depth)[step // 2::step, step // 2::step].astype(np.float64).ravel()
-    ys, xs = np.meshgrid((rows + 0.5) / height * 2.0 - 1.0, (cols + 0.5) / width * 2.0 - 1.0, indexing="ij")
+    xs, ys = (grid or PixelGrid()).subsample_ndc(height, width, step)
     covered = np.isfinite(depth)
     if not np.any(covered):
         return np.zeros((0, 3))
     inverse = np.linalg.inv(np.asarray(camera.projection, np.float64) @ camera.view_matrix)
     # (x, y) NDC times the inverse's first two columns, then each plane's z and w columns added.
-    xy = xs.ravel()[covered, None] * inverse[:, 0] + ys.ravel()[covered, None] * inverse[:, 1]
+    xy = xs[covered, None] * inverse[:, 0] + ys[covered, None] * inverse[:, 1]
 
     def unproject(z):
         clip = xy + (z * inverse[:, 2] + inverse[:, 3])

@@ -67,6 +67,24 @@ def test_a_coherent_image_summed_over_its_row_runs_matches_a_per_element_count(s
     np.testing.assert_allclose(mean_depth, expected[2], rtol=1e-9)
 
 
+@pytest.mark.parametrize("dtype", [np.uint32, np.int32, np.int64])
+def test_the_gpus_unsigned_ids_give_the_statistics_of_signed_ones(dtype):
+    """The resolve reads the element ids back as R32UI: no element (-1) is 0xFFFFFFFF there, and
+    ids beyond the list (either kind) count for no element, on the run path and the per-pixel one."""
+    rng = np.random.default_rng(7)
+    n, height, width = 9, 40, 56
+    coherent = np.repeat(rng.integers(-1, n + 3, size=(height, 7)), 8, axis=1)  # runs of 8
+    noisy = rng.integers(-1, n + 3, size=(height, width))
+    for image in (coherent, noisy):
+        depth = rng.uniform(0.5, 50.0, size=(height, width)).astype(np.float32)
+        depth[3, :5] = np.inf
+        counts, centre, mean_depth = element_pixel_stats(image.astype(dtype), n, depth)
+        expected = brute_force(image, n, depth)
+        assert np.array_equal(counts, expected[0])
+        np.testing.assert_allclose(centre, expected[1], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(mean_depth, expected[2], rtol=1e-9)
+
+
 def test_a_kept_grid_gives_the_same_statistics_as_a_new_one_at_every_size():
     """The grid a replay keeps follows the frame size (a kept grid of another size would put
     every centroid elsewhere)."""

@@ -188,6 +188,20 @@ def test_front_points_from_view_depth_are_the_gbuffer_positions(step):
     np.testing.assert_allclose(points, expected, atol=1e-3)
 
 
+def test_front_points_with_a_kept_grid_follow_the_frame_size_and_step():
+    """A replay keeps the sub-sample's NDC (PixelGrid); a kept grid of another size or step would
+    put every point elsewhere."""
+    from phrt.phrt_addon.raster.gbuffer import PixelGrid, front_points
+    snapshot = mirror_scene("HYBRID")
+    depth = ray_cast_gbuffer(snapshot).view_depth
+    grid = PixelGrid()
+    for view_depth, step in [(depth, 8), (depth, 8), (depth, 4), (depth[:, : WIDTH // 2], 4), (depth, 8)]:
+        kept = front_points(snapshot.camera, view_depth, step, grid)
+        assert len(kept) > 0
+        np.testing.assert_array_equal(kept, front_points(snapshot.camera, view_depth, step))
+    assert not grid.subsample_ndc(HEIGHT, WIDTH, 8)[0].flags.writeable
+
+
 def test_the_rays_counted_per_element_are_the_rays_the_effects_cast():
     """The cost model learns ms per ray from the effects' ray counters and each element's rays per
     pixel from the per-element counts: both must count the same rays (a reflection's hit shadow
