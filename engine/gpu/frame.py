@@ -120,8 +120,11 @@ class GPUFrame:
 
     def traced_change(self):
         """(h, w, 4) of the last ``shade(..., measure_change=True)``: x the luminance of what traced
-        reflections and refractions changed, y what traced shadows changed (clipped to [0, 1])."""
-        return readback.read_target(gpu_module(), self, "traced_change")
+        reflections and refractions changed, y what traced shadows changed (clipped to [0, 1]).
+        Every traced pixel lies in the rectangle the layers were read back in: only it is read back
+        (zeros elsewhere); all of it when the layers were read whole."""
+        rect = self._gbuffer_rect if self._gbuffer is not None else None
+        return readback.read_target(gpu_module(), self, "traced_change", rect=rect)
 
     def read_albedo(self):
         """(opaque, transparent) albedo + metallic, (h, w, 4): only the reference lighting needs them."""

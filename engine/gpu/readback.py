@@ -21,10 +21,17 @@ def read(gpu, framebuffer, slot, kind, channels, width, height, rect=None) -> np
     return np.asarray(buffer, dtype=dtype).reshape((h, w, channels) if channels > 1 else (h, w))
 
 
-def read_target(gpu, frame, name, kind="FLOAT", channels=4) -> np.ndarray:
-    """One of ``frame.targets`` read back whole."""
+def read_target(gpu, frame, name, kind="FLOAT", channels=4, rect=None) -> np.ndarray:
+    """One of ``frame.targets`` read back whole, or only the rectangle ``rect`` (x, y, w, h; row 0
+    at the bottom) placed among zeros."""
     framebuffer = gpu.types.GPUFrameBuffer(color_slots=(frame.targets[name],))
-    return read(gpu, framebuffer, 0, kind, channels, frame.width, frame.height)
+    part = read(gpu, framebuffer, 0, kind, channels, frame.width, frame.height, rect)
+    if rect is None:
+        return part
+    x, y, w, h = rect
+    whole = np.zeros((frame.height, frame.width) + part.shape[2:], part.dtype)
+    whole[y:y + h, x:x + w] = part
+    return whole
 
 
 def read_gbuffer(gpu, frame, transparent_drawn: bool, rect=None) -> GBuffer:

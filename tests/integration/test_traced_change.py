@@ -15,7 +15,7 @@ import pytest  # noqa: E402
 pytest.importorskip("bpy")
 
 from phrt.engine import extract  # noqa: E402
-from phrt.engine.gpu import lighting  # noqa: E402
+from phrt.engine.gpu import lighting, readback  # noqa: E402
 from phrt.engine.gpu.frame import GPUFrame  # noqa: E402
 from phrt.phrt_addon.frame_types import TracedTerms  # noqa: E402
 
@@ -70,3 +70,40 @@ def test_a_measured_change_is_this_frames_alone_and_leaves_the_image_as_it_is(ex
     # Measuring does not change the image.
     np.testing.assert_allclose(first, unmeasured, rtol=1e-6, atol=1e-7)
     np.testing.assert_allclose(again, unmeasured, rtol=1e-6, atol=1e-7)
+
+
+def test_after_a_cropped_read_back_the_change_is_read_in_that_rectangle_only():
+    """A frame whose layers were read back in a rectangle (every traced pixel is in it) reads the
+    change there and gives zeros elsewhere: inside, what a whole read gives."""
+    scene = lit_scene(0)
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        out = []
+        for rect in (None, (7, 5, 40, 30)):
+            frame = GPUFrame(snapshot)
+            frame.draw()
+            gbuffer = frame.gbuffer(rect)
+            traced = TracedTerms()
+            for name in ("opaque", "transparent"):  # every covered pixel in the rectangle, in shadow
+                covered = getattr(gbuffer, name).covered.copy()
+                covered[:5], covered[35:], covered[:, :7], covered[:, 47:] = False, False, False, False
+                pixels = np.flatnonzero(covered)
+                traced.shadow_visibility[(name, 1)] = (pixels, np.zeros(len(pixels), np.float32))
+            frame.shade(traced, measure_change=True)
+            asked = []
+            read = readback.read
+            readback.read = lambda *args, **kwargs: asked.append(args[-1]) or read(*args, **kwargs)
+            try:
+                out.append(np.array(frame.traced_change()))
+            finally:
+                readback.read = read
+            assert asked == [rect]  # only the rectangle read back
+        return out
+
+    whole, cropped = run_on_gpu(scene, job)
+    inside = np.zeros(whole.shape[:2], bool)
+    inside[5:35, 7:47] = True  # rows from the bottom, as read back
+    assert whole[inside][..., 1].max() > 0.01
+    np.testing.assert_allclose(cropped[inside], whole[inside], rtol=1e-6, atol=1e-7)
+    assert not cropped[~inside].any()
