@@ -195,7 +195,8 @@ def test_front_points_with_a_kept_grid_follow_the_frame_size_and_step():
     snapshot = mirror_scene("HYBRID")
     depth = ray_cast_gbuffer(snapshot).view_depth
     grid = PixelGrid()
-    for view_depth, step in [(depth, 8), (depth, 8), (depth, 4), (depth[:, : WIDTH // 2], 4), (depth, 8)]:
+    for view_depth, step in [(depth, 8), (depth, 8), (depth, 4), (depth[:, : WIDTH // 2], 4),
+                             (depth[: HEIGHT // 2], 4), (depth, 8)]:
         kept = front_points(snapshot.camera, view_depth, step, grid)
         assert len(kept) > 0
         np.testing.assert_array_equal(kept, front_points(snapshot.camera, view_depth, step))

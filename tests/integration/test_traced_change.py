@@ -93,7 +93,9 @@ def test_after_a_cropped_read_back_the_change_is_read_in_that_rectangle_only():
             frame.shade(traced, measure_change=True)
             asked = []
             read = readback.read
-            readback.read = lambda *args, **kwargs: asked.append(args[-1]) or read(*args, **kwargs)
+            # read(gpu, framebuffer, slot, kind, channels, width, height, rect=None): the rectangle asked
+            readback.read = lambda *args, **kwargs: asked.append(
+                kwargs["rect"] if "rect" in kwargs else (args[7] if len(args) > 7 else None)) or read(*args, **kwargs)
             try:
                 out.append(np.array(frame.traced_change()))
             finally:
