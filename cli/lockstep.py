@@ -18,8 +18,9 @@ once for all of them).  The raster and raytrace runs (where a budget at F finds 
 run before, the oracle after, as in a plain sweep.  A second raster run (``plan.GROUP_RASTER``) is
 rendered in the group: the oracle's shared time (its budget minus what every variant spends on the
 raster half and the composite) comes from it, measured on the machine the hybrid runs met, not
-minutes before (eval-17: the group's raster half 2.7-8.8 ms slower than the first raster run's on two
-paths, 0.5-2.4 ms faster on the others, against 6-48 ms of time for tracing); ``speed_vs_raster`` in ``sweep.csv`` says how
+minutes before (eval-17: the group's raster half 2.7-8.8 ms slower than the first raster run's on
+two paths, 0.7-2.4 ms faster on a third, against 8-47 ms of time for tracing).
+``speed_vs_raster`` in ``sweep.csv`` says how
 far the machine drifted between the raster run and the hybrid runs, the same for all of them, and
 ``summary.json``'s ``lockstep_runs`` (``sweep.csv``'s column of that name) how many runs (the group
 raster run included) a run was
