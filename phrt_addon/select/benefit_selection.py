@@ -38,13 +38,12 @@ A band in time
     ``REST`` frames before it is added again; an item that left the view does not wait when it
     returns.
 A guard on flips
-    The pop is the element's, whichever of its effects comes back.  An element's flip is a
-    change of its traced state between two frames in which it is visible (what
-    ``runs.summary.max_flips_in_window`` counts).  An element none of whose items is traced
-    is taken again only ``FLIP_GAP`` frames after its last flip, whatever the time left does:
-    so no element flips more than twice within FLIP_GAP + 1 frames (issue 20: twice in 10),
-    even when the budget forces drops.  The guard holds adds only; a drop the time left forces
-    is never delayed (the budget comes first).
+    The pop is the element's, whichever of its effects comes back.  An element none of whose
+    items is traced is taken again only ``FLIP_GAP`` frames after its last flip (a change of its
+    traced state between two frames in view), whatever the time left does: no element flips more
+    than twice within FLIP_GAP + 1 frames (issue 20: twice in 10), even when the budget forces
+    drops (``flip_guard``).  The guard holds adds only; a drop the time left forces is never
+    delayed (the budget comes first).
 Cost
     Per item from ``item_costs`` (its expected rays times its learned rays ratio times the
     effect's learned ms per ray; Q = 1 is the measured cost, a designer's Q scales it), plus per
@@ -64,6 +63,7 @@ from itertools import repeat
 import numpy as np
 
 from . import knapsack
+from .flip_guard import FLIP_GAP, FlipGuard  # noqa: F401
 from .frame_time import (AIM_OVER, AIM_RANGE, AIM_SHARE, AIM_STEP, MARGIN_FRAMES, STEADY_FRAMES,  # noqa: F401
                          STEADY_QUANTILE, FrameTime, MeasureCost)
 from .item_choice import ItemChoice
@@ -78,9 +78,6 @@ ADD_SLACK = 0.25
 # left's noise); an item dropped while it competed waits REST frames before it is added again.
 HOLD = 0.1
 REST = 4
-# An element not traced is taken again only FLIP_GAP frames after its last flip (see the guard):
-# three flips are then at least FLIP_GAP frames apart, none within a window of FLIP_GAP + 1.
-FLIP_GAP = 9
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
@@ -120,8 +117,7 @@ class BenefitSelector:
         self.waited: dict[tuple[str, str], int] = {}
         self.previous: set[tuple[str, str]] = set()
         self.dropped_at: dict[tuple[str, str], int] = {}  # item -> self.frames when it was last dropped
-        self.flipped_at: dict[str, int] = {}  # element -> self.frames of its last flip (in view both frames)
-        self.previous_visible: set[str] = set()  # the elements in view last frame
+        self.guard = FlipGuard()  # the elements' flips
         self.previous_rate: dict[tuple[str, str], float] = {}
         self.prior_cache: dict[str, np.ndarray] = {}  # element name -> (3,) its last computed priors
         self.priors_at = None  # self.frames when the priors were last computed
@@ -137,9 +133,21 @@ class BenefitSelector:
         """:func:`_item_keys`, kept while the element names stay those of the last frame."""
         cached = self._names_keys
         if cached is None or cached[0] != list(names):
-            cached = (list(names), _item_keys(names))
+            cached = (list(names), _item_keys(names), {})
             self._names_keys = cached
         return cached[1]
+
+    def _mask(self, names, members) -> np.ndarray:
+        """(n, 3) bool: the items of ``names`` among ``members`` (item keys), by a lookup of each
+        member (the members are few beside the items: the traced, the recently dropped)."""
+        keys = self._keys(names)
+        positions = self._names_keys[2]
+        if not positions:
+            positions.update(zip(keys, range(len(keys))))
+        flat = np.zeros(len(keys), bool)
+        found = [index for index in map(positions.get, members) if index is not None]
+        flat[found] = True
+        return flat.reshape(len(names), len(EFFECTS))
 
     # -- the decision ------------------------------------------------------------
     def margin_ms(self, available_ms: float) -> float:
@@ -196,22 +204,14 @@ class BenefitSelector:
                 eligible[:, j] &= probe
 
         keys = self._keys(names)
-        count = eligible.size
-        was = np.fromiter(map(self.previous.__contains__, keys), bool, count=count).reshape(eligible.shape)
-        dropped = np.fromiter(map(self.dropped_at.get, keys, repeat(-REST)), np.float64,
-                              count=count).reshape(eligible.shape)
-        resting = self.frames - dropped < REST
-        # The guard on flips: an element none of whose items was traced last frame is taken again
-        # only FLIP_GAP frames after its last flip (whether it was in view last frame or not: one
-        # that left the view for a frame and came back may flip again once it is back).
-        flipped = np.fromiter(map(self.flipped_at.get, names, repeat(-FLIP_GAP)), np.float64, count=len(names))
-        guarded = (self.frames - flipped < FLIP_GAP) & ~was.any(axis=1)
+        was = self._mask(names, self.previous)
+        resting = self._mask(names, [key for key, at in self.dropped_at.items() if self.frames - at < REST])
+        traced_before = was.any(axis=1)
+        guarded = self.guard.blocked(names, self.frames) & ~traced_before
         may_add = eligible & ~(~was & resting) & ~guarded[:, None]
         held = was.any(axis=0)  # the effects whose fixed part was paid last frame
         charged_fixed = np.where(held, fixed * (1.0 - HOLD), fixed * peak)
         switched = np.where(was, value * (1.0 + SWITCH), value * (1.0 - SWITCH))
-        waited = np.fromiter(map(self.waited.get, keys, repeat(0)), np.float64,
-                             count=count).reshape(eligible.shape)
         if tier_costs is None:
             tier_costs = cost[:, :, None] * np.array([TIER_COST[tier] for tier in TIER_RATES])[None, None, :]
         tier_costs = np.clip(finite(tier_costs, nan=np.inf), 0.0, np.inf)
@@ -241,7 +241,9 @@ class BenefitSelector:
         if np.any(explore):
             bonus = np.zeros(eligible.shape)
             total = float(switched[eligible].sum()) + 1e-12
-            bonus[explore] = total * np.minimum((waited[explore] + 1) / EXPLORE_FRAMES, 1.0)
+            waited = np.fromiter(map(self.waited.get, [keys[k] for k in np.flatnonzero(explore).tolist()],
+                                     repeat(0)), np.float64)
+            bonus[explore] = total * np.minimum((waited + 1) / EXPLORE_FRAMES, 1.0)
             added = fill(may_add & ~kept, bonus, room, np.where(paid, 0.0, charged_fixed))
             rate = np.where(kept, rate, added)
         chosen = rate > 0
@@ -289,16 +291,13 @@ class BenefitSelector:
         chosen = np.asarray(choice.chosen, bool)
         eligible = np.asarray(choice.eligible, bool)
         keys = self._keys(names)
-        was = np.fromiter(map(self.previous.__contains__, keys), bool, count=len(keys)).reshape(eligible.shape)
-        # Dropped while it competed (not for leaving the view): it rests (REST).
+        was = self._mask(names, self.previous)
+        # Dropped while it competed (not for leaving the view): it rests (REST); older drops are
+        # forgotten (they hold nothing back any more).
+        self.dropped_at = {key: at for key, at in self.dropped_at.items() if self.frames - at < REST}
         self.dropped_at.update((keys[k], self.frames) for k in np.flatnonzero((eligible & ~chosen & was).ravel()))
-        # The elements' flips (the guard): traced state changed, in view on both frames.
         visible = eligible.any(axis=1) if choice.visible is None else np.asarray(choice.visible, bool)
-        traced_before = {name for name, _ in self.previous}
-        for i in np.flatnonzero(visible):
-            if names[i] in self.previous_visible and bool(chosen[i].any()) != (names[i] in traced_before):
-                self.flipped_at[names[i]] = self.frames
-        self.previous_visible = {names[i] for i in np.flatnonzero(visible)}
+        self.guard.observe(names, visible, chosen.any(axis=1), {name for name, _ in self.previous}, self.frames)
         traced = np.flatnonzero(chosen.ravel())
         self.previous = {keys[k] for k in traced}
         rates = np.ones(len(keys)) if choice.rate is None else np.asarray(choice.rate, np.float64).ravel()
