@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import knapsack_bounds
+from . import knapsack_bounds, knapsack_greedy
 from ..finite import finite
 
 DEFAULT_BINS = 256
@@ -120,8 +120,10 @@ def solve(values, costs, capacity, bins: int = DEFAULT_BINS) -> np.ndarray:
 def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None, group_costs=None) -> np.ndarray:
     """Multiple-choice knapsack: per item (row) at most one option (column), the largest summed
     value within ``capacity``.  Returns the chosen option per item, -1 for none.  Costs rounded
-    up to bins of T as in :func:`solve` (never over T); exact for the rounded costs; compared
-    with the best single (item, option) that fits.  ``groups`` (int per item, into
+    up to bins of T as in :func:`solve` (never over T); exact for the rounded costs up to
+    ``EXACT_LIMIT`` items that may be chosen, beyond them the greedy on the linear relaxation's
+    increments (:mod:`knapsack_greedy`, true costs); compared with the best single (item, option)
+    that fits.  ``groups`` (int per item, into
     ``group_costs``): a group's cost is paid once if any of its items is chosen, as in
     :func:`solve_grouped` (an effect's fixed work)."""
     values = np.atleast_2d(_finite(values, nan=0.0).reshape(np.shape(values)))
@@ -143,11 +145,15 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None
     rows = np.flatnonzero(usable.any(axis=1))
     if len(rows) == 0:
         return choice
-    used_groups = np.unique(groups[rows])
-    n_bins = bins_for(len(rows) + len(used_groups), bins)
-    weights = _in_bins(costs, capacity, n_bins)  # 0 only for a free option (T may be subnormal)
-    group_weights = _in_bins(group_costs, capacity, n_bins).tolist()
-    choice[rows] = _programme(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
+    if len(rows) > EXACT_LIMIT:  # beyond the programme's reach in a frame: the increments' greedy
+        choice[rows] = knapsack_greedy.grouped_greedy(values[rows], costs[rows], usable[rows], groups[rows],
+                                                      group_costs, capacity)
+    else:
+        used_groups = np.unique(groups[rows])
+        n_bins = bins_for(len(rows) + len(used_groups), bins)
+        weights = _in_bins(costs, capacity, n_bins)  # 0 only for a free option (T may be subnormal)
+        group_weights = _in_bins(group_costs, capacity, n_bins).tolist()
+        choice[rows] = _programme(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
     flat = np.where(usable, values, -np.inf).ravel()
     single = int(np.argmax(flat))
     if flat[single] > float(sum(values[i, o] for i, o in enumerate(choice) if o >= 0)):

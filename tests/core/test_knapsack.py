@@ -244,3 +244,55 @@ def test_grouped_with_few_useful_items_is_the_exact_optimum(instance):
     assert costs[chosen].sum() + group_costs[np.unique(groups[chosen])].sum() <= capacity * (1 + 1e-12)
     assert values[chosen].sum() == pytest.approx(grouped_brute_force(values, costs, groups, group_costs, capacity),
                                                  abs=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(grouped_choice_instances)
+def test_multiple_choice_beyond_the_exact_limit_is_never_over_T_and_at_least_half_the_optimum(instance):
+    """The increments' greedy (``knapsack_greedy``, what ``solve_choices`` runs beyond EXACT_LIMIT
+    items), here on a few items so that brute force can judge it: never over T with the groups'
+    costs; with the best single option beside it, at least half of the optimum (no groups)."""
+    values, costs, groups, group_costs, capacity = (np.array(instance[0]), np.array(instance[1]),
+                                                    np.array(instance[2]), np.array(instance[3]), instance[4])
+    limit = knapsack.EXACT_LIMIT
+    knapsack.EXACT_LIMIT = 0
+    try:
+        grouped = knapsack.solve_choices(values, costs, capacity, groups=groups, group_costs=group_costs)
+        plain = knapsack.solve_choices(values, costs, capacity)
+    finally:
+        knapsack.EXACT_LIMIT = limit
+    picked = [(i, o) for i, o in enumerate(grouped.tolist()) if o >= 0]
+    spent = sum(costs[i, o] for i, o in picked) + sum(group_costs[g] for g in {groups[i] for i, _ in picked})
+    assert spent <= capacity * (1 + 1e-12)
+    picked = [(i, o) for i, o in enumerate(plain.tolist()) if o >= 0]
+    assert sum(costs[i, o] for i, o in picked) <= capacity * (1 + 1e-12)
+    optimum = grouped_choices_brute_force(values, costs, np.zeros(len(values), int), np.zeros(1), capacity)
+    assert sum(values[i, o] for i, o in picked) >= 0.5 * optimum - 1e-9
+
+
+def test_multiple_choice_beyond_the_exact_limit_fills_T_at_least_as_well_as_the_programme():
+    """1,200 items of three rates (quality tiers on a large scene), an effect's fixed part per
+    group: the greedy on true costs is never over T and worth at least the binned programme's
+    choice on the same items (which loses up to a bin per chosen item to the rounding)."""
+    rng = np.random.default_rng(5)
+    n = knapsack.EXACT_LIMIT + 200
+    full_value, full_cost = rng.uniform(0, 10, n), rng.uniform(0.5, 5, n)
+    values = np.where(rng.random((n, 3)) < 0.9, np.outer(full_value, [1.0, 0.85, 0.65]), 0.0)
+    costs = np.outer(full_cost, [1.0, 0.6, 0.35])
+    groups, group_costs, capacity = rng.integers(0, 3, n), np.array([2.0, 1.0, 1.5]), float(full_cost.sum() / 3)
+
+    def outcome(choice):
+        picked = [(i, o) for i, o in enumerate(choice.tolist()) if o >= 0]
+        spent = sum(costs[i, o] for i, o in picked) + sum(group_costs[g] for g in {groups[i] for i, _ in picked})
+        return sum(values[i, o] for i, o in picked), spent
+
+    greedy_value, greedy_spent = outcome(knapsack.solve_choices(values, costs, capacity, groups=groups,
+                                                                 group_costs=group_costs))
+    limit = knapsack.EXACT_LIMIT
+    knapsack.EXACT_LIMIT = 10 * n
+    try:
+        exact_value, _ = outcome(knapsack.solve_choices(values, costs, capacity, groups=groups, group_costs=group_costs))
+    finally:
+        knapsack.EXACT_LIMIT = limit
+    assert greedy_spent <= capacity
+    assert greedy_value >= exact_value
