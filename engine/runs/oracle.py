@@ -13,7 +13,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ...phrt_addon.report import metrics, oracle
+from ...phrt_addon.report import metrics, oracle, oracle_fit
 from ...phrt_addon.runs import run_files
 from .. import extract, final
 from . import item_measure
@@ -127,10 +127,10 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
             if cut:
                 capped[str(frame)] = [len(names), len(competing)]
             cost, spread, alone, area = [], [], [], []
-            rendered = {frozenset(): (raster, 0.0)}  # subset -> (image, its measured trace ms)
+            rendered = {frozenset(): (0.0, flip_raster)}  # subset -> (its measured trace ms, its LDR-FLIP)
             for name in names:  # the advisor's items are measured by the same function
                 traced = item_measure.measure_subset(renderer, frame, (name,), reference)
-                rendered[frozenset((name,))] = (traced.image, traced.trace_ms)
+                rendered[frozenset((name,))] = (traced.trace_ms, traced.flip)
                 cost.append(traced.trace_ms)
                 spread.append(traced.spread_ms)
                 alone.append(traced.flip)
@@ -139,25 +139,25 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
             cost = np.array(cost, dtype=np.float64)
             overhead = 0.0
             if len(names) > 1:  # all together: the trace stage's fixed part, paid once per frame
-                together = item_measure.measure_subset(renderer, frame, names)
-                rendered[frozenset(names)] = (together.image, together.trace_ms)
+                together = item_measure.measure_subset(renderer, frame, names, reference)
+                rendered[frozenset(names)] = (together.trace_ms, together.flip)
                 overhead = oracle.trace_overhead_ms(cost, together.trace_ms)
             candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=cost - overhead,
                                                 benefit=flip_raster - alone, flip_raster=flip_raster,
                                                 flip_alone=alone, area_px=np.array(area), overhead_ms=overhead,
                                                 cost_spread_ms=np.array(spread, dtype=np.float64))
             measured.append(candidates)
-            flips = {}
+
+            def measure(subset):  # rendered and measured even when a run chose the same
+                traced = item_measure.measure_subset(renderer, frame, tuple(sorted(subset)), reference)
+                return traced.trace_ms, traced.flip
+
             for labels in budgets.values():
                 # The group's key is rounded (to 0.1 ms): the oracle gets its runs' smallest exact budget,
                 # never more time than a run it judges had.
                 exact_budget = min(float(runs[label]["budget_ms"]) for label in labels)
-                oracle_set = candidates.choose(oracle.nominal_time_left(exact_budget, shared))
-                if oracle_set not in rendered:  # rendered and measured even when a run chose the same
-                    image, stats, _ = renderer.render(frame, oracle_set)
-                    rendered[oracle_set] = (image, item_measure.trace_ms(stats))
-                if oracle_set not in flips:
-                    flips[oracle_set] = metrics.flip(reference, rendered[oracle_set][0])
+                oracle_set, refits = oracle_fit.feasible_choice(
+                    candidates, oracle.nominal_time_left(exact_budget, shared), exact_budget, measure, rendered)
                 for label in labels:
                     run = runs[label]
                     row = run["frames"].get(frame)
@@ -168,8 +168,8 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                     heuristic_flip = metrics.flip(reference, metrics.read_image(run_image))
                     regret_rows.append(oracle.regret_row(
                         label, frame, run["budget_ms"], shared, row.get("time_left_ms"), heuristic_set,
-                        heuristic_flip, oracle_set, flips[oracle_set], candidates,
-                        oracle_trace_ms=rendered[oracle_set][1]))
+                        heuristic_flip, oracle_set, rendered[oracle_set][1], candidates,
+                        oracle_trace_ms=rendered[oracle_set][0], oracle_refits=refits))
             if on_progress is not None:
                 on_progress(count + 1, len(frames))
     return oracle.write_results(out_dir, every, frames, measured, regret_rows,

@@ -29,9 +29,11 @@ On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
    (:func:`knapsack`, branch and bound);
 3. renders that subset (always: with an ample budget the oracle's image is
    rendered and measured too, never copied from the run) and measures its
-   error and its own trace time (``oracle_trace_ms``, beside its predicted
-   ``oracle_cost_ms``): ``regret = error(run) - error(oracle)``, the run's
-   error being that of its own image.
+   error and its own trace time (``oracle_trace_ms``, the median of TIMINGS,
+   beside its predicted ``oracle_cost_ms``); a subset whose trace is over its
+   time is chosen again (``oracle_fit``, ``oracle_refits``):
+   ``regret = error(run) - error(oracle)``, the run's error being that of its
+   own image.
 
 The oracle measures error, unweighted: the designer's priority K says what
 the designer wants traced first and steers a selection, but the yardstick is
@@ -81,7 +83,8 @@ CANDIDATE_COLUMNS = ("frame", "element", "area_px", "cost_ms", "cost_spread_ms",
                      "flip_raster", "benefit")
 REGRET_COLUMNS = ("run", "frame", "budget_ms", "shared_ms", "capacity_ms", "time_left_ms", "raster_flip",
                   "heuristic_flip", "oracle_flip", "regret", "heuristic", "oracle", "oracle_only", "heuristic_only",
-                  "oracle_cost_ms", "oracle_trace_ms", "heuristic_cost_ms", "oracle_benefit", "heuristic_benefit")
+                  "oracle_cost_ms", "oracle_trace_ms", "heuristic_cost_ms", "oracle_benefit", "heuristic_benefit",
+                  "oracle_refits")
 REGRET_FLOATS = ("budget_ms", "shared_ms", "capacity_ms", "time_left_ms", "raster_flip", "heuristic_flip",
                  "oracle_flip", "regret", "oracle_cost_ms", "oracle_trace_ms", "heuristic_cost_ms", "oracle_benefit",
                  "heuristic_benefit")
@@ -321,6 +324,8 @@ def read_results(folder) -> OracleResults | None:
         parsed = dict(row)
         for key in ("frame",):
             parsed[key] = int(row[key])
+        # Re-choices of the oracle's subset held to its time (``oracle_fit``); 0 in older folders.
+        parsed["oracle_refits"] = int(row["oracle_refits"]) if row.get("oracle_refits") not in (None, "") else 0
         for key in REGRET_FLOATS:
             parsed[key] = float(row[key]) if row.get(key, "") != "" else None
         for key in ("heuristic", "oracle", "oracle_only", "heuristic_only"):
@@ -331,7 +336,7 @@ def read_results(folder) -> OracleResults | None:
 
 
 def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set, heuristic_flip, oracle_set,
-               oracle_flip, candidates: FrameCandidates, oracle_trace_ms=None) -> dict:
+               oracle_flip, candidates: FrameCandidates, oracle_trace_ms=None, oracle_refits=0) -> dict:
     """One row of ``regret.csv``: a run's frame against its budget's oracle."""
     oracle_cost, oracle_benefit = candidates.totals(oracle_set)
     heuristic_cost, heuristic_benefit = candidates.totals(heuristic_set)
@@ -343,7 +348,7 @@ def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set,
             "oracle_only": _joined(set(oracle_set) - set(heuristic_set)),
             "heuristic_only": _joined(set(heuristic_set) - set(oracle_set)),
             "oracle_cost_ms": oracle_cost, "oracle_trace_ms": oracle_trace_ms, "heuristic_cost_ms": heuristic_cost,
-            "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit}
+            "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit, "oracle_refits": oracle_refits}
 
 
 def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_dir=None):

@@ -1,0 +1,57 @@
+"""The oracle's subset held to its time (``engine/runs/oracle.py`` renders; plain Python).
+
+The oracle's knapsack (``oracle.FrameCandidates.choose``) adds up costs measured with each
+candidate traced alone.  Traced together they may take longer than that sum (a reflection that
+now sees another traced element, shadow rays of several casters over the same receivers): in
+eval-18 the chosen subset's own trace took more than the budget's time for tracing plus a tenth
+of the budget on 4-8 of 37-110 sampled frames per path on atrium and the showcase, by up to
+27 ms.  Such a subset is not "the best subset within the same time", and the share of its
+error reduction a run captures is understated.
+
+So the chosen subset is rendered and timed (the median of ``oracle.TIMINGS`` timings, as for a
+candidate alone); if its trace is over the capacity by more than ``OVER_ALLOWANCE`` x the
+budget (the allowance a run's p95 frame has: issue 20's 1.10x), what it took beyond its
+predicted cost is charged against the capacity and the knapsack chooses again, up to
+``REFITS`` times.  If none of the choices fits, the oracle is the subset measured so far (each
+candidate alone, all of them together, the choices) with the lowest LDR-FLIP among those whose
+trace fits the capacity itself; the raster frame (nothing traced) always does.
+"""
+from __future__ import annotations
+
+OVER_ALLOWANCE = 0.10
+REFITS = 3
+
+
+def within_time(trace_ms: float, capacity_ms: float, budget_ms: float) -> bool:
+    """Whether a subset's measured trace fits the budget's time for tracing (with the allowance)."""
+    return float(trace_ms) <= float(capacity_ms) + OVER_ALLOWANCE * max(float(budget_ms), 0.0)
+
+
+def feasible_choice(candidates, capacity_ms: float, budget_ms: float, measure, measured=None) -> tuple:
+    """(subset, re-choices made): the knapsack's subset for ``capacity_ms``, chosen again while its
+    measured trace is over time (see the module's docstring).  ``measure(subset) -> (trace ms,
+    LDR-FLIP)`` renders a subset (called once per subset); ``measured`` {subset: (trace ms,
+    LDR-FLIP)} holds subsets already measured (the candidates alone, all of them together, the
+    raster frame) and receives the new ones."""
+    measured = {} if measured is None else measured
+    room = float(capacity_ms)
+    subset = candidates.choose(room)
+    refits = 0
+    while subset:
+        if subset not in measured:
+            measured[subset] = measure(subset)
+        trace_ms = measured[subset][0]
+        if within_time(trace_ms, capacity_ms, budget_ms):
+            return subset, refits
+        if refits == REFITS:
+            break
+        # What the subset took beyond the sum of its parts, charged to the next choice.
+        room -= max(float(trace_ms) - candidates.totals(subset)[0], 0.0)
+        subset = candidates.choose(room)
+        refits += 1
+    if refits == 0:  # nothing fits the capacity: the raster frame
+        return frozenset(), 0
+    # The choices kept overrunning: the best subset measured whose trace fits the capacity itself.
+    fitting = [(flip, sorted(chosen), chosen) for chosen, (trace_ms, flip) in measured.items()
+               if float(trace_ms) <= float(capacity_ms)]
+    return (min(fitting)[2] if fitting else frozenset()), refits
