@@ -351,10 +351,12 @@ def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set,
             "oracle_benefit": oracle_benefit, "heuristic_benefit": heuristic_benefit, "oracle_refits": oracle_refits}
 
 
-def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_dir=None):
+def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_dir=None,
+                  clock_ratio=None):
     """Write the oracle folder's three files (``oracle.json`` last: it marks completion).
     ``shared_dir``: the raster run the shared times came from (None: the oracle's own frames with
-    nothing traced), named in ``shared_from`` with its summary's hash."""
+    nothing traced), named in ``shared_from`` with its summary's hash; ``clock_ratio``: how much slower
+    the oracle ran than the runs (``oracle_fit.clock_ratio``; its timings were divided by it)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
@@ -381,6 +383,7 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
         "every": every, "frames": list(frames), "runs": runs, "capped": capped or {}, "timings": TIMINGS,
         "shared_from": Path(shared_dir).name if shared_dir is not None else None,
         "shared_summary_hash": summary_hash(shared_dir) if shared_dir is not None else None,
+        "clock_ratio": clock_ratio,
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "

@@ -70,3 +70,13 @@ def test_the_allowance_is_the_runs_p95_allowance_of_the_budget():
     assert oracle_fit.within_time(23.0, 17.0, 60.0) and not oracle_fit.within_time(23.1, 17.0, 60.0)
     assert oracle_fit.within_time(0.0, 0.0, 0.0) and not oracle_fit.within_time(0.1, 0.0, -5.0)
     assert oracle_fit.OVER_ALLOWANCE == pytest.approx(0.10)
+
+
+def test_the_oracles_clock_is_put_on_the_runs_from_the_raster_frames_both_measured():
+    """The oracle ran 20% slower than the runs on the frames both measured (its raster + composite
+    against the runs' raster run): its timings are divided by 1.2.  Frames without both numbers do
+    not count; none at all: 1; a ratio beyond CLOCK_RANGE is clamped."""
+    pairs = [(60.0, 50.0), (48.0, 40.0), (36.0, 30.0), (None, 40.0), (50.0, None), (float("nan"), 3.0), (0.0, 30.0)]
+    assert oracle_fit.clock_ratio(pairs) == pytest.approx(1.2)
+    assert oracle_fit.clock_ratio([]) == 1.0 and oracle_fit.clock_ratio([(None, None)]) == 1.0
+    assert oracle_fit.clock_ratio([(500.0, 50.0)]) == oracle_fit.CLOCK_RANGE[1]
