@@ -99,7 +99,9 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
     reference_dir = Path(reference_dir)
     reference_frames = [row["frame"] for row in run_files.read_frames(reference_dir)]
     frames = oracle.sampled_frames(reference_frames, every)
-    shared_of = oracle.shared_ms(run_files.read_frames(raster_dir)) if raster_dir is not None else {}
+    raster_rows = run_files.read_frames(raster_dir) if raster_dir is not None else []
+    shared_of = oracle.shared_ms(raster_rows)
+    gbuffer_of = {row["frame"]: row.get("gbuffer_ms") for row in raster_rows}
     runs = {}
     for label, run_dir in hybrid_dirs.items():
         summary = run_files.read_summary(run_dir)
@@ -121,6 +123,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
             raster, raster_stats, selection = renderer.render(frame, ())
             flip_raster = metrics.flip(reference, raster)
             own_shared = float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)
+            own_gbuffer = raster_stats.get("gbuffer_ms")
             competing = competing_candidates(selection)
             names, cut = oracle.cap_candidates(competing, _relevance(selection, competing), seed=frame)
             if cut:
@@ -139,15 +142,16 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 together = item_measure.measure_subset(renderer, frame, names, reference)
                 rendered[frozenset(names)] = (together.trace_ms, together.flip)
                 overhead = oracle.trace_overhead_ms(cost, together.trace_ms)
-            sampled.append((frame, reference_path, flip_raster, own_shared, names, np.array(cost, np.float64),
+            sampled.append((frame, reference_path, flip_raster, own_shared, own_gbuffer, names, np.array(cost, np.float64),
                             np.array(spread, np.float64), np.array(alone, np.float64), np.array(area), overhead,
                             rendered))
             if on_progress is not None:
                 on_progress(count + 1, len(frames))
         # The oracle's timings on the runs' clock: the machine may have drifted since the runs (eval-18
         # re-run: candidates 9-21% dearer), and a slower oracle buys less in the same capacity.
-        ratio = oracle_fit.clock_ratio([(item[3], shared_of.get(item[0])) for item in sampled])
-        for frame, reference_path, flip_raster, own_shared, names, cost, spread, alone, area, overhead, rendered in sampled:
+        ratio = oracle_fit.clock_ratio([(item[4], gbuffer_of.get(item[0])) for item in sampled])
+        for frame, reference_path, flip_raster, own_shared, _, names, cost, spread, alone, area, overhead, rendered \
+                in sampled:
             reference = metrics.read_image(reference_path)
             shared = shared_of.get(frame)
             if shared is None:

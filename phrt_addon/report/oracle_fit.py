@@ -11,8 +11,9 @@ error reduction a run captures is understated.
 The oracle renders after the runs, and this machine's speed drifts by tens of percent within
 minutes: re-run on eval-18's runs an hour later, every candidate cost 9-21% more (median), and the
 oracle's reduction of the raster frame's error at half of the way on atrium/path2 fell from 35% to
-15%.  Its timings are put on the runs' clock (:func:`clock_ratio`: its own raster frame of each
-sampled frame against the runs' raster run on it), the capacity being theirs.
+15%.  Its timings are put on the runs' clock (:func:`clock_ratio`: the G-buffer pass of its
+raster frame of each sampled frame against the runs' raster run's on it), the capacity being
+theirs.
 
 The chosen subset is rendered and timed (the median of ``oracle.TIMINGS`` timings, as for a
 candidate alone); if its trace is over the capacity by more than ``OVER_ALLOWANCE`` x the
@@ -34,9 +35,11 @@ CLOCK_RANGE = (0.5, 2.0)
 
 def clock_ratio(pairs) -> float:
     """How much slower the oracle's machine ran than the runs' on the same frames: the median of
-    (the oracle's raster + composite ms of a frame) / (the shared ms the runs' raster run measured
-    on it) over ``pairs``, within CLOCK_RANGE; 1 without both numbers on any frame.  The oracle's
-    timings are divided by it: its costs on the clock the runs met (the capacity is theirs)."""
+    (the oracle's G-buffer pass ms of a frame) / (that of the runs' raster run on it: the same draw,
+    whatever the mode) over ``pairs``, within CLOCK_RANGE; 1 without both numbers on any frame.  The
+    oracle's timings are divided by it: its costs on the clock the runs met (the capacity is
+    theirs).  The G-buffer pass runs on llvmpipe's threads, the trace on Embree's and numpy's, all
+    on the same CPU cores: a proxy of the machine's speed, not an exact one."""
     ratios = [float(own) / float(shared) for own, shared in pairs
               if own is not None and shared is not None and np.isfinite(own) and np.isfinite(shared)
               and own > 0 and shared > 0]
