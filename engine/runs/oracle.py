@@ -108,9 +108,9 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
         runs[label] = {"dir": Path(run_dir), "frames": {row["frame"]: row for row in run_files.read_frames(run_dir)},
                        "selected": _selection_by_frame(run_dir), "budget_ms": summary.get("budget_ms")}
     budgets = _budget_groups(runs)
-    measured, regret_rows, capped, sampled = [], [], {}, []
+    measured, regret_rows, capped = [], [], {}
+    clock = oracle_fit.Clock()
     with ForcedRenderer(scene, camera, resolution) as renderer:
-        # First every sampled frame's candidates, each alone and all together (the oracle's clock).
         for count, frame in enumerate(frames):
             reference_path = run_files.frame_image_path(reference_dir, frame)
             if reference_path is None:
@@ -121,49 +121,42 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 _, _, warm = renderer.render(frame, ())
                 renderer.render(frame, competing_candidates(warm))
             raster, raster_stats, selection = renderer.render(frame, ())
+            # The machine's speed now against the runs' on this frame (the G-buffer pass, 3 timings):
+            # the frame's timings are divided by the ratio of the last few frames (``oracle_fit.Clock``).
+            gbuffer = [raster_stats.get("gbuffer_ms")] + [renderer.render(frame, ())[1].get("gbuffer_ms")
+                                                          for _ in range(oracle.TIMINGS - 1)]
+            ratio = clock.observe(gbuffer, gbuffer_of.get(frame))
             flip_raster = metrics.flip(reference, raster)
-            own_shared = float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)
-            own_gbuffer = raster_stats.get("gbuffer_ms")
+            shared = shared_of.get(frame)
+            if shared is None:  # no raster run: the oracle's own frame, on the runs' clock
+                shared = (float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)) / ratio
             competing = competing_candidates(selection)
             names, cut = oracle.cap_candidates(competing, _relevance(selection, competing), seed=frame)
             if cut:
                 capped[str(frame)] = [len(names), len(competing)]
             cost, spread, alone, area = [], [], [], []
-            rendered = {frozenset(): (0.0, flip_raster)}  # subset -> (its measured trace ms, its LDR-FLIP)
+            rendered = {frozenset(): (0.0, flip_raster)}  # subset -> (its trace ms on the runs' clock, its LDR-FLIP)
             for name in names:  # the advisor's items are measured by the same function
                 traced = item_measure.measure_subset(renderer, frame, (name,), reference)
-                rendered[frozenset((name,))] = (traced.trace_ms, traced.flip)
-                cost.append(traced.trace_ms)
-                spread.append(traced.spread_ms)
+                rendered[frozenset((name,))] = (traced.trace_ms / ratio, traced.flip)
+                cost.append(traced.trace_ms / ratio)
+                spread.append(traced.spread_ms / ratio)
                 alone.append(traced.flip)
                 area.append(int(selection.elements.area_px[selection.names.index(name)]))
+            alone = np.array(alone, dtype=np.float64)
+            cost = np.array(cost, dtype=np.float64)
             overhead = 0.0
             if len(names) > 1:  # all together: the trace stage's fixed part, paid once per frame
                 together = item_measure.measure_subset(renderer, frame, names, reference)
-                rendered[frozenset(names)] = (together.trace_ms, together.flip)
-                overhead = oracle.trace_overhead_ms(cost, together.trace_ms)
-            sampled.append((frame, reference_path, flip_raster, own_shared, own_gbuffer, names, np.array(cost, np.float64),
-                            np.array(spread, np.float64), np.array(alone, np.float64), np.array(area), overhead,
-                            rendered))
-            if on_progress is not None:
-                on_progress(count + 1, len(frames))
-        # The oracle's timings on the runs' clock: the machine may have drifted since the runs (eval-18
-        # re-run: candidates 9-21% dearer), and a slower oracle buys less in the same capacity.
-        ratio = oracle_fit.clock_ratio([(item[4], gbuffer_of.get(item[0])) for item in sampled])
-        for frame, reference_path, flip_raster, own_shared, _, names, cost, spread, alone, area, overhead, rendered \
-                in sampled:
-            reference = metrics.read_image(reference_path)
-            shared = shared_of.get(frame)
-            if shared is None:
-                shared = own_shared
-            candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=(cost - overhead) / ratio,
+                rendered[frozenset(names)] = (together.trace_ms / ratio, together.flip)
+                overhead = oracle.trace_overhead_ms(cost, together.trace_ms / ratio)
+            candidates = oracle.FrameCandidates(frame=frame, names=names, cost_ms=cost - overhead,
                                                 benefit=flip_raster - alone, flip_raster=flip_raster,
-                                                flip_alone=alone, area_px=area, overhead_ms=overhead / ratio,
-                                                cost_spread_ms=spread / ratio)
+                                                flip_alone=alone, area_px=np.array(area), overhead_ms=overhead,
+                                                cost_spread_ms=np.array(spread, dtype=np.float64))
             measured.append(candidates)
-            on_clock = {subset: (trace_ms / ratio, flip) for subset, (trace_ms, flip) in rendered.items()}
 
-            def measure(subset, frame=frame, reference=reference):  # rendered even when a run chose the same
+            def measure(subset):  # rendered and measured even when a run chose the same
                 traced = item_measure.measure_subset(renderer, frame, tuple(sorted(subset)), reference)
                 return traced.trace_ms / ratio, traced.flip
 
@@ -172,7 +165,7 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                 # never more time than a run it judges had.
                 exact_budget = min(float(runs[label]["budget_ms"]) for label in labels)
                 oracle_set, refits = oracle_fit.feasible_choice(
-                    candidates, oracle.nominal_time_left(exact_budget, shared), exact_budget, measure, on_clock)
+                    candidates, oracle.nominal_time_left(exact_budget, shared), exact_budget, measure, rendered)
                 for label in labels:
                     run = runs[label]
                     row = run["frames"].get(frame)
@@ -183,11 +176,13 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
                     heuristic_flip = metrics.flip(reference, metrics.read_image(run_image))
                     regret_rows.append(oracle.regret_row(
                         label, frame, run["budget_ms"], shared, row.get("time_left_ms"), heuristic_set,
-                        heuristic_flip, oracle_set, on_clock[oracle_set][1], candidates,
-                        oracle_trace_ms=on_clock[oracle_set][0], oracle_refits=refits))
+                        heuristic_flip, oracle_set, rendered[oracle_set][1], candidates,
+                        oracle_trace_ms=rendered[oracle_set][0], oracle_refits=refits))
+            if on_progress is not None:
+                on_progress(count + 1, len(frames))
     return oracle.write_results(out_dir, every, frames, measured, regret_rows,
                                 {label: run["dir"] for label, run in runs.items()}, capped=capped,
-                                shared_dir=raster_dir, clock_ratio=ratio)
+                                shared_dir=raster_dir, clock=clock.summary())
 
 
 def _relevance(selection, names) -> list:

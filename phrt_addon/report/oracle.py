@@ -14,7 +14,9 @@ On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
      less the trace stage's fixed part, which a frame pays once whatever it
      traces (``overhead_ms``: how much the candidates traced alone cost more,
      summed, than all of them traced together, per extra trace); a subset
-     costs its elements' costs plus that fixed part;
+     costs its elements' costs plus that fixed part; every timing on the
+     runs' clock (``oracle_fit.Clock``: divided by how much slower the
+     machine ran than during the runs, from the G-buffer pass);
 2. **one oracle per budget**, the same for every variant at that budget: its
    time for tracing (``capacity_ms``) is the budget's nominal time left on
    that frame, ``budget_ms - shared_ms``, where ``shared_ms`` is what every
@@ -352,11 +354,11 @@ def regret_row(run_label, frame, budget_ms, shared, time_left_ms, heuristic_set,
 
 
 def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note="", capped=None, shared_dir=None,
-                  clock_ratio=None):
+                  clock=None):
     """Write the oracle folder's three files (``oracle.json`` last: it marks completion).
     ``shared_dir``: the raster run the shared times came from (None: the oracle's own frames with
-    nothing traced), named in ``shared_from`` with its summary's hash; ``clock_ratio``: how much slower
-    the oracle ran than the runs (``oracle_fit.clock_ratio``; its timings were divided by it)."""
+    nothing traced), named in ``shared_from`` with its summary's hash; ``clock``: how much slower the
+    oracle ran than the runs (``oracle_fit.Clock.summary``: its timings were divided by it)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(folder / CANDIDATES_CSV, CANDIDATE_COLUMNS, [
@@ -383,12 +385,13 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
         "every": every, "frames": list(frames), "runs": runs, "capped": capped or {}, "timings": TIMINGS,
         "shared_from": Path(shared_dir).name if shared_dir is not None else None,
         "shared_summary_hash": summary_hash(shared_dir) if shared_dir is not None else None,
-        "clock_ratio": clock_ratio,
+        **(clock or {"clock_ratio": None}),
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "
         "benefit and cost within the budget's nominal time for tracing (budget - the raster run's raster and "
         "composite ms on that frame; shared_from names that run: in a lockstep sweep the raster run rendered "
-        "with the hybrid runs), its subset rendered and measured; unweighted by K"})
+        "with the hybrid runs), its timings divided by clock_ratio (the runs' clock), its subset rendered and "
+        "measured, chosen again when its trace overran that time; unweighted by K"})
     atomic.write_text(folder / ORACLE_JSON, json.dumps(info, indent=2, allow_nan=False) + "\n")
     return info

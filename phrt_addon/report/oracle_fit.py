@@ -11,9 +11,8 @@ error reduction a run captures is understated.
 The oracle renders after the runs, and this machine's speed drifts by tens of percent within
 minutes: re-run on eval-18's runs an hour later, every candidate cost 9-21% more (median), and the
 oracle's reduction of the raster frame's error at half of the way on atrium/path2 fell from 35% to
-15%.  Its timings are put on the runs' clock (:func:`clock_ratio`: the G-buffer pass of its
-raster frame of each sampled frame against the runs' raster run's on it), the capacity being
-theirs.
+15%.  Its timings are put on the runs' clock (:class:`Clock`: the G-buffer pass of its raster
+frame of each sampled frame against the runs' raster run's on it), the capacity being theirs.
 
 The chosen subset is rendered and timed (the median of ``oracle.TIMINGS`` timings, as for a
 candidate alone); if its trace is over the capacity by more than ``OVER_ALLOWANCE`` x the
@@ -31,21 +30,48 @@ OVER_ALLOWANCE = 0.10
 REFITS = 3
 # The clock ratio is clamped to this range: beyond it the oracle's machine is not the runs' kind.
 CLOCK_RANGE = (0.5, 2.0)
+CLOCK_WINDOW = 8  # sampled frames whose ratios make the one used (this one's included)
 
 
-def clock_ratio(pairs) -> float:
-    """How much slower the oracle's machine ran than the runs' on the same frames: the median of
-    (the oracle's G-buffer pass ms of a frame) / (that of the runs' raster run on it: the same draw,
-    whatever the mode) over ``pairs``, within CLOCK_RANGE; 1 without both numbers on any frame.  The
-    oracle's timings are divided by it: its costs on the clock the runs met (the capacity is
-    theirs).  The G-buffer pass runs on llvmpipe's threads, the trace on Embree's and numpy's, all
-    on the same CPU cores: a proxy of the machine's speed, not an exact one."""
-    ratios = [float(own) / float(shared) for own, shared in pairs
-              if own is not None and shared is not None and np.isfinite(own) and np.isfinite(shared)
-              and own > 0 and shared > 0]
-    if not ratios:
-        return 1.0
-    return float(np.clip(np.median(ratios), *CLOCK_RANGE))
+def _positive(values) -> list:
+    out = []
+    for value in values:
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            continue
+        if np.isfinite(value) and value > 0:
+            out.append(value)
+    return out
+
+
+class Clock:
+    """How much slower the oracle's machine runs than the runs' did, sampled frame by sampled
+    frame: the median of its G-buffer pass timings of the frame (the same draw whatever the mode)
+    over the runs' raster run's G-buffer pass on it.  The ratio a frame's timings are divided by is
+    the median of the last ``CLOCK_WINDOW`` frames' (it follows the machine's drift through the
+    oracle's own minutes), within CLOCK_RANGE; 1 before any frame had both numbers.  The G-buffer
+    pass runs on llvmpipe's threads and the trace on Embree's and numpy's, on the same CPU cores:
+    a proxy of the machine's speed, not an exact one."""
+
+    def __init__(self):
+        self.ratios: list[float] = []  # per sampled frame with both numbers
+        self.used: list[float] = []  # the ratio each sampled frame's timings were divided by
+
+    def observe(self, own_timings, runs_ms) -> float:
+        own, runs = _positive(own_timings), _positive([runs_ms])
+        if own and runs:
+            self.ratios.append(float(np.median(own)) / runs[0])
+        recent = self.ratios[-CLOCK_WINDOW:]
+        ratio = float(np.clip(np.median(recent), *CLOCK_RANGE)) if recent else 1.0
+        self.used.append(ratio)
+        return ratio
+
+    def summary(self) -> dict:
+        """``oracle.json``'s account: the median ratio used, its range, the frames measured."""
+        used = self.used or [1.0]
+        return {"clock_ratio": float(np.median(used)), "clock_ratio_min": float(min(used)),
+                "clock_ratio_max": float(max(used)), "clock_frames": len(self.ratios)}
 
 
 def within_time(trace_ms: float, capacity_ms: float, budget_ms: float) -> bool:

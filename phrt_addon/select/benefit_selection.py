@@ -124,7 +124,7 @@ class BenefitSelector:
         self.kept: dict[tuple[str, float], float] = {}  # (effect, rate) -> learned share of the benefit
         self.measured_at: dict[tuple[str, str], float] = {}  # item -> the rate of its last measurement
         self.frames = 0
-        self._names_keys = None  # (the last frame's names, their item keys)
+        self._names_keys = None  # (the last frame's names, their item keys, {item key: flat index} when asked)
         self.time = FrameTime()  # the margin, the steady time left, the aim
         self.measure_cost = MeasureCost()
         self.measured_frame = -MEASURE_STALE  # the frame index of the last measurement

@@ -12,9 +12,9 @@ the time left forces is never delayed (the budget comes first).
 Measured and left out (6 Dec 2026): letting an element with one flip in its window back at once,
 kept traced (its cheapest item paid first) until that flip left the window, which keeps the same
 guarantee.  Old and new rule rendered in lockstep on the four judged paths at 0.25 and 0.5 of the
-way: captured share, frames traced and LDR-FLIP without a difference at all eight points
-(docs/selection.md, "A lock instead of the wait"); the forced items cost budget on the frames
-without room.
+way: captured share paired, 1 win, 1 loss, 6 without a difference; p95 / budget higher with the
+lock at 6 of 8 points (docs/selection.md, "A lock instead of the wait"): the forced items cost
+budget on the frames without room.
 """
 from __future__ import annotations
 

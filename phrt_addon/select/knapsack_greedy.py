@@ -7,9 +7,11 @@ Per row (an item), its usable options with the empty choice form the upper conve
 falling value per ms.  The linear relaxation's optimum takes increments in order of value per
 ms across all rows until T is full (Sinha and Zoltners); here every increment that still fits
 and is the next of its row is taken, and a row whose increment did not fit takes no further
-one.  With the best single option that fits (``solve_choices`` compares it), the result is
-at least half of the optimum: the relaxation's optimum is at most the increments taken before
-the first miss plus that missed increment, whose row's option is a single option that fits.
+one.  Without the groups' costs, and with the best single option that fits (``solve_choices``
+compares it), the result is at least half of the optimum: the relaxation's optimum is at most
+the increments taken before the first miss plus that missed increment, whose row's option is a
+single option that fits.  With them there is no such bound (the groups are paid all, then only
+those used: a group left out would not be tried).
 Costs as they are (no bins): never over T.  A group's cost (an effect's fixed part) is paid once
 if any of its rows is chosen: every group with a usable option is paid first, then the groups
 left unused are returned to T and the rows solved again; when the groups together do not fit T,
@@ -27,7 +29,9 @@ def _hull_increments(values, costs, usable):
     """Per row, the increments of its upper convex hull from (0, 0), vectorised over rows (one
     pass per option): arrays (row, option, cost step, value step, position on the row's hull)."""
     n_rows, n_options = values.shape
-    by_cost = np.argsort(np.where(usable, costs, np.inf), axis=1, kind="stable")  # ties: the cheaper first
+    # By cost, of equal costs the more valuable first (a free option worth more must not be dropped
+    # for a free one worth less: both have an infinite slope, and the first is taken).
+    by_cost = np.lexsort((-np.where(usable, values, -np.inf), np.where(usable, costs, np.inf)), axis=1)
     cost = np.take_along_axis(costs, by_cost, axis=1)
     value = np.take_along_axis(values, by_cost, axis=1)
     alive = np.take_along_axis(usable, by_cost, axis=1)
@@ -67,6 +71,13 @@ def greedy_choices(values, costs, usable, capacity) -> np.ndarray:
     rows, options, dc, dv, step = _hull_increments(values, costs, usable)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio = np.where(dc > 0, dv / dc, np.inf)
+    # A hull's steps fall in value per ms; rounding may raise a later step's a hair above an earlier
+    # one's, which would take it first and charge only its own step: clamp to the step before.
+    before = np.full(values.shape[0], np.inf)
+    for position in range(int(step.max()) + 1 if len(step) else 0):
+        at = step == position
+        ratio[at] = np.minimum(ratio[at], before[rows[at]])
+        before[rows[at]] = ratio[at]
     order = np.lexsort((step, rows, -ratio))  # by value per ms; a row's steps in their order
     # The relaxation's prefix: every increment before the first that does not fit (a row's steps
     # come in their order, so each row's last increment in it is its option).

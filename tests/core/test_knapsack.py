@@ -296,3 +296,15 @@ def test_multiple_choice_beyond_the_exact_limit_fills_T_at_least_as_well_as_the_
         knapsack.EXACT_LIMIT = limit
     assert greedy_spent <= capacity
     assert greedy_value >= exact_value
+
+
+def test_the_greedy_keeps_the_more_valuable_of_free_options():
+    """Options of cost 0 all have an infinite value per ms: of two, the more valuable is the one taken
+    (found in review: the first by column was taken, and the better one dropped)."""
+    limit = knapsack.EXACT_LIMIT
+    knapsack.EXACT_LIMIT = 0
+    try:
+        choice = knapsack.solve_choices([[1.0, 5.0]] * 3, [[0.0, 0.0]] * 3, 10.0)
+    finally:
+        knapsack.EXACT_LIMIT = limit
+    assert choice.tolist() == [1, 1, 1]

@@ -72,11 +72,35 @@ def test_the_allowance_is_the_runs_p95_allowance_of_the_budget():
     assert oracle_fit.OVER_ALLOWANCE == pytest.approx(0.10)
 
 
-def test_the_oracles_clock_is_put_on_the_runs_from_the_raster_frames_both_measured():
-    """The oracle ran 20% slower than the runs on the frames both measured (its raster + composite
-    against the runs' raster run): its timings are divided by 1.2.  Frames without both numbers do
-    not count; none at all: 1; a ratio beyond CLOCK_RANGE is clamped."""
-    pairs = [(60.0, 50.0), (48.0, 40.0), (36.0, 30.0), (None, 40.0), (50.0, None), (float("nan"), 3.0), (0.0, 30.0)]
-    assert oracle_fit.clock_ratio(pairs) == pytest.approx(1.2)
-    assert oracle_fit.clock_ratio([]) == 1.0 and oracle_fit.clock_ratio([(None, None)]) == 1.0
-    assert oracle_fit.clock_ratio([(500.0, 50.0)]) == oracle_fit.CLOCK_RANGE[1]
+def test_the_oracles_clock_follows_the_machine_against_the_runs_g_buffer_pass():
+    """Per sampled frame the median of the oracle's G-buffer timings over the runs' raster run's on
+    it; the ratio used is the median of the last CLOCK_WINDOW frames' (it follows a drift), clamped;
+    frames without both numbers do not count; 1 before any has them."""
+    clock = oracle_fit.Clock()
+    assert clock.observe([None, float("nan")], 40.0) == 1.0  # nothing measured yet
+    assert clock.observe([60.0, 66.0, 54.0], 50.0) == pytest.approx(1.2)
+    assert clock.observe([48.0, 48.0, 47.0], None) == pytest.approx(1.2)  # no run timing: not counted
+    for _ in range(oracle_fit.CLOCK_WINDOW):  # the machine slows down to 1.5x: the window follows
+        ratio = clock.observe([75.0, 75.0, 75.0], 50.0)
+    assert ratio == pytest.approx(1.5)
+    assert oracle_fit.Clock().observe([500.0], 50.0) == oracle_fit.CLOCK_RANGE[1]
+    summary = clock.summary()
+    assert summary["clock_frames"] == 1 + oracle_fit.CLOCK_WINDOW
+    assert summary["clock_ratio_min"] == 1.0 and summary["clock_ratio_max"] == pytest.approx(1.5)
+
+
+def test_choices_that_keep_overrunning_stop_after_refits():
+    """Every subset traced takes 47 ms, over the 40 ms capacity and its allowance (6): re-chosen
+    REFITS times (each time the room shrinks by what the last took beyond its parts), no more, then
+    the raster frame (nothing measured fits the 40 ms)."""
+    frame = oracle.FrameCandidates(frame=4, names=[f"e{i}" for i in range(8)], cost_ms=np.full(8, 6.0),
+                                   benefit=np.linspace(0.02, 0.01, 8), flip_raster=0.10, overhead_ms=0.0)
+    calls = []
+
+    def measure(subset):
+        calls.append(subset)
+        return 47.0, 0.05
+
+    chosen, refits = oracle_fit.feasible_choice(frame, 40.0, 60.0, measure, {frozenset(): (0.0, 0.10)})
+    assert refits == oracle_fit.REFITS and [len(subset) for subset in calls] == [6, 4, 1]
+    assert chosen == frozenset()
