@@ -156,7 +156,8 @@ def solve_choices(values, costs, capacity, bins: int = DEFAULT_BINS, groups=None
         choice[rows] = _programme(values[rows], weights[rows], usable[rows], groups[rows], group_weights, n_bins)
     flat = np.where(usable, values, -np.inf).ravel()
     single = int(np.argmax(flat))
-    if flat[single] > float(sum(values[i, o] for i, o in enumerate(choice) if o >= 0)):
+    taken = choice >= 0
+    if flat[single] > float(values[np.flatnonzero(taken), choice[taken]].sum()):
         choice[:] = -1
         choice[single // n_options] = single % n_options
     return choice
@@ -305,7 +306,7 @@ def _enumerated(values, costs, groups, group_costs, capacity) -> np.ndarray:
     return subsets[row] | free
 
 
-SUBSET_GROUPS = 4
+SUBSET_GROUPS = knapsack_greedy.SUBSET_GROUPS
 
 
 def _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bins) -> np.ndarray:
@@ -323,18 +324,8 @@ def _grouped_by_subsets(values, costs, groups, group_costs, capacity, useful, bi
             picked[members] = solve(values[members], costs[members], left, bins)
         return picked
 
-    candidates = []
-    if float(group_costs[present].sum()) <= capacity or len(present) > SUBSET_GROUPS:
-        paid = present
-        for _ in range(len(present)):
-            candidates.append(solved(paid))
-            used = [g for g in paid if np.any(candidates[-1] & (groups == g))]
-            if not used or used == paid:
-                break
-            paid = used
-    else:
-        candidates = [solved([g for bit, g in enumerate(present) if mask >> bit & 1])
-                      for mask in range(1, 2 ** len(present))]
+    candidates = knapsack_greedy.groups_paid(present, group_costs, capacity, solved,
+                                             lambda picked, paid: [g for g in paid if np.any(picked & (groups == g))])
     chosen = max(candidates, key=lambda picked: float(values[picked].sum()))
     single = useful[np.argmax(values[useful])]
     if values[single] > float(values[chosen].sum()):

@@ -125,16 +125,26 @@ def grouped_greedy(values, costs, usable, groups, group_costs, capacity) -> np.n
         picked = choice >= 0
         return float(values[np.flatnonzero(picked), choice[picked]].sum())
 
+    candidates = groups_paid(present, group_costs, capacity, solved,
+                             lambda choice, paid: [g for g in paid if np.any((choice >= 0) & (groups == g))])
+    return max(candidates, key=worth) if candidates else np.full(len(values), -1, np.int64)
+
+
+def groups_paid(present, group_costs, capacity, solved, used_of) -> list:
+    """The choices tried for groups whose cost is paid once (``knapsack.solve_grouped`` beyond its
+    programme, :func:`grouped_greedy`): ``solved(paid groups)`` with every group ``present`` paid,
+    then again with only those ``used_of(choice, paid)`` while that drops some; when the groups
+    together do not fit ``capacity``, each non-empty subset of them (up to SUBSET_GROUPS groups)."""
     candidates = []
     if float(group_costs[present].sum()) <= capacity or len(present) > SUBSET_GROUPS:
         paid = present
         for _ in range(len(present)):
             candidates.append(solved(paid))
-            used = [g for g in paid if np.any((candidates[-1] >= 0) & (groups == g))]
+            used = used_of(candidates[-1], paid)
             if not used or used == paid:
                 break
             paid = used
     else:
         candidates = [solved([g for bit, g in enumerate(present) if mask >> bit & 1])
                       for mask in range(1, 2 ** len(present))]
-    return max(candidates, key=worth) if candidates else np.full(len(values), -1, np.int64)
+    return candidates
