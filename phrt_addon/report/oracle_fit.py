@@ -34,15 +34,9 @@ CLOCK_WINDOW = 8  # sampled frames whose ratios make the one used (this one's in
 
 
 def _positive(values) -> list:
-    out = []
-    for value in values:
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            continue
-        if np.isfinite(value) and value > 0:
-            out.append(value)
-    return out
+    """The finite positive numbers among ``values`` (None left out)."""
+    numbers = [float(value) for value in values if value is not None]
+    return [number for number in numbers if np.isfinite(number) and number > 0]
 
 
 class Clock:
