@@ -44,6 +44,7 @@ from .scene.snapshot import SceneSnapshot
 from .trace.element_bounds import ElementBounds
 from .trace.shadow_region import ShadowRegionIndex
 from .trace.stage import TraceStage
+from .trace.rates import forced_rates
 from .select.item_rays import effect_rays_per_pixel, expected_rays, flags_array
 from .trace.trace_result import TraceResult, traced_effects
 from .trace.trace_rect import ShadowHulls, trace_rect
@@ -199,7 +200,8 @@ class FrameRenderer:
                 readback_ms = _ms(begin)
             traced_frame = self.trace_stage.run(snapshot, layers, materials, selected, element_bounds,
                                                 effects=selection.effects,
-                                                rates=choice.rates if choice is not None else self._forced_rates(n_elements))
+                                                rates=choice.rates if choice is not None else
+                                                self._forced_rates(frame_elements.names))
         traced, counters, element_rays = traced_frame.traced, traced_frame.counters, traced_frame.element_rays
         upload_ms = counters.upload_ms + prepare_ms  # Embree builds: one-time work
         trace_ms = _ms(start)
@@ -293,10 +295,8 @@ class FrameRenderer:
                            selection_rows=selection.rows(snapshot.frame), problems=list(snapshot.problems))
 
     # ------------------------------------------------------------------
-    def _forced_rates(self, n_elements):
-        if self.forced_selection is None or not self.forced_rates:
-            return None
-        return {effect: np.full(n_elements, float(rate)) for effect, rate in self.forced_rates.items()}
+    def _forced_rates(self, names):
+        return None if self.forced_selection is None else forced_rates(self.forced_rates, names)
 
     @staticmethod
     def ray_pixels(snapshot, selected, effects):

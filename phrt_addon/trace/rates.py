@@ -300,6 +300,21 @@ def element_rates(rates, effect: str, n_elements: int) -> np.ndarray:
     return result
 
 
+def forced_rates(forced, names):
+    """The oracle's rates (``FrameRenderer.forced_rates``) as the trace stage takes them: per effect
+    name a rate for every element (a float) or per element name (a dict; 1.0 for those not named),
+    as per-element arrays over ``names``; None when nothing is forced."""
+    if not forced:
+        return None
+    arrays = {}
+    for effect, rate in forced.items():
+        if isinstance(rate, dict):
+            arrays[effect] = np.array([check_rate(rate.get(name, 1.0)) for name in names], np.float64)
+        else:
+            arrays[effect] = np.full(len(names), check_rate(rate))
+    return arrays
+
+
 def traced_subset(flat, pixel_rate, height: int, width: int, frame: int) -> np.ndarray:
     """Bool per pixel of ``flat`` (flat indices of an (height, width) image): whether it gets rays
     on ``frame`` at its rate ``pixel_rate`` (a number or one per pixel)."""

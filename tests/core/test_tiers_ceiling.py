@@ -1,0 +1,128 @@
+"""Issue 23's ceiling: the exact multiple-choice knapsack over (element, effect, rate) options against
+brute force, its candidates held to their measured time like the oracle's, and the oracle's forced
+per-element rates."""
+from itertools import product
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from phrt.phrt_addon.report import oracle_fit
+from phrt.phrt_addon.report.tiers_ceiling import TierCandidates, exact_choices
+from phrt.phrt_addon.trace.rates import forced_rates
+
+
+def brute_force(values, costs, capacity):
+    best, best_cost = 0.0, 0.0
+    for picks in product(range(-1, values.shape[1]), repeat=len(values)):
+        cost = sum(costs[i, o] for i, o in enumerate(picks) if o >= 0)
+        value = sum(values[i, o] for i, o in enumerate(picks) if o >= 0)
+        if cost <= capacity and (value > best + 1e-12 or (abs(value - best) <= 1e-12 and cost < best_cost)):
+            best, best_cost = value, cost
+    return best, best_cost
+
+
+instances = st.integers(0, 6).flatmap(lambda n: st.tuples(
+    st.lists(st.lists(st.floats(0.0, 10.0), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.lists(st.lists(st.one_of(st.floats(0.0, 20.0), st.just(float("inf"))), min_size=3, max_size=3),
+             min_size=n, max_size=n),
+    st.floats(0.0, 60.0)))
+
+
+@settings(max_examples=300, deadline=None)
+@given(instances)
+def test_exact_against_brute_force(instance):
+    values = np.array(instance[0], np.float64).reshape(-1, 3)
+    costs = np.array(instance[1], np.float64).reshape(-1, 3)
+    capacity = instance[2]
+    picked = exact_choices(values, costs, capacity)
+    chosen = [(i, o) for i, o in enumerate(picked.tolist()) if o >= 0]
+    cost = sum(costs[i, o] for i, o in chosen)
+    value = sum(values[i, o] for i, o in chosen)
+    best, best_cost = brute_force(values, costs, capacity)
+    assert cost <= capacity + 1e-9
+    assert value == pytest.approx(best, abs=1e-9)
+
+
+whole = st.integers(0, 5).flatmap(lambda n: st.tuples(
+    st.lists(st.lists(st.integers(0, 6), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.lists(st.lists(st.integers(0, 9), min_size=3, max_size=3), min_size=n, max_size=n),
+    st.integers(0, 30)))
+
+
+@settings(max_examples=200, deadline=None)
+@given(whole)
+def test_among_equal_values_the_cheaper_combination(instance):
+    values = np.array(instance[0], np.float64).reshape(-1, 3)
+    costs = np.array(instance[1], np.float64).reshape(-1, 3)
+    picked = exact_choices(values, costs, float(instance[2]))
+    chosen = [(i, o) for i, o in enumerate(picked.tolist()) if o >= 0]
+    best, best_cost = brute_force(values, costs, instance[2])
+    assert sum(values[i, o] for i, o in chosen) == best
+    assert sum(costs[i, o] for i, o in chosen) == best_cost
+
+
+def test_a_mirror_too_dear_at_full_rate_is_bought_at_quarter_rate():
+    # One item: quarter 4 ms removes 0.6 of what full (14 ms) removes; 10 ms of room.
+    picked = exact_choices(np.array([[0.6, 0.8, 1.0]]), np.array([[4.0, 7.0, 14.0]]), 10.0)
+    assert picked.tolist() == [1]  # half rate: the most that fits
+    picked = exact_choices(np.array([[0.6, 0.8, 1.0], [0.5, 0.7, 0.9]]), np.array([[4.0, 7.0, 14.0]] * 2), 10.0)
+    assert sorted(picked.tolist()) == [0, 0]  # two quarters (1.1) beat one half and nothing (0.8)
+
+
+def test_bad_numbers_and_no_time():
+    values = np.array([[np.nan, 1.0, np.inf], [1.0, 1.0, 1.0]])
+    costs = np.array([[1.0, np.nan, 1.0], [-2.0, 5.0, 5.0]])
+    assert exact_choices(values, costs, -1.0).tolist() == [-1, -1]
+    assert exact_choices(values, costs, float("nan")).tolist() == [-1, -1]
+    picked = exact_choices(values, costs, 0.0)  # a negative cost counts as free
+    assert picked.tolist() == [-1, 0]
+
+
+def test_beyond_the_exact_size_within_the_programmes_bound():
+    rng = np.random.default_rng(3)
+    values, costs = rng.uniform(0, 1, (20, 3)), rng.uniform(1, 10, (20, 3))
+    picked = exact_choices(values, costs, 30.0)
+    assert sum(costs[i, o] for i, o in enumerate(picked.tolist()) if o >= 0) <= 30.0 + 1e-9
+    assert (picked >= 0).any()
+
+
+def candidates():
+    return TierCandidates(frame=4, items=[("Mirror", "reflections"), ("Oak", "shadows")], rates=(0.25, 0.5, 1.0),
+                          cost_ms=np.array([[3.0, 5.0, 9.0], [4.0, 6.0, 8.0]]),
+                          benefit=np.array([[0.004, 0.006, 0.007], [0.001, 0.002, 0.003]]),
+                          flip_raster=0.02, overhead_ms=2.0)
+
+
+def test_candidates_pay_the_fixed_part_once_and_name_their_rates():
+    found = candidates()
+    assert found.choose(1.9) == frozenset()
+    chosen = found.choose(13.0)  # 11 ms of items: half mirror (5) + half oak (6)
+    assert chosen == {("Mirror", "reflections", 0.5), ("Oak", "shadows", 0.5)}
+    assert found.totals(chosen) == pytest.approx((13.0, 0.008))
+    assert found.totals(frozenset()) == (0.0, 0.0)
+    found.allowed = np.array([[True] * 3, [False, False, True]])  # shadows at full rate only
+    assert found.choose(13.0) == {("Mirror", "reflections", 1.0)}
+
+
+def test_a_combination_over_its_time_is_chosen_again():
+    found = candidates()
+    measured = {}
+
+    def measure(subset):  # the pair costs 6 ms more together than its parts
+        cost, _ = found.totals(subset)
+        return cost + (6.0 if len(subset) > 1 else 0.0), 0.01
+
+    chosen, refits = oracle_fit.feasible_choice(found, 13.0, 20.0, measure, measured)
+    assert refits == 1 and len(chosen) == 1
+    assert measured[chosen][0] <= 13.0 + oracle_fit.OVER_ALLOWANCE * 20.0
+
+
+def test_forced_rates_per_element_or_for_all():
+    names = ["Mirror", "Oak", "Glass"]
+    assert forced_rates(None, names) is None
+    arrays = forced_rates({"reflections": 0.5, "shadows": {"Oak": 0.25}}, names)
+    assert arrays["reflections"].tolist() == [0.5, 0.5, 0.5]
+    assert arrays["shadows"].tolist() == [1.0, 0.25, 1.0]
+    with pytest.raises(ValueError):
+        forced_rates({"shadows": {"Oak": 0.3}}, names)
