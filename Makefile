@@ -7,7 +7,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.phrt-installed
 
-.PHONY: demo test test-fast test-compat bench paper soak faults extension scenes clean selection-eval rate-flip
+.PHONY: demo test test-fast test-compat bench paper soak faults extension scenes clean selection-eval rate-flip tiers-ceiling
 
 $(STAMP): requirements.txt pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -70,6 +70,12 @@ selection-eval: $(STAMP)
 # selection-eval (it reuses that folder's orbiting showcase scene).
 rate-flip: $(STAMP)
 	$(PY) tools/rate_flip.py --out out/rate-flip --frames $(EVAL_FRAMES)
+
+# The most any choice of rates could buy at each budget (issue 23's ceiling): every (element,
+# effect) item of every 4th frame traced alone at each rate, the best combination chosen exactly
+# and rendered: out/tiers-ceiling/tiers_ceiling.{md,csv}.  About 20 minutes; after selection-eval.
+tiers-ceiling: $(STAMP)
+	$(PY) tools/tiers_ceiling.py --eval out/selection-eval --every 4 --budget-at 0.1,0.25,0.5 --out out/tiers-ceiling
 
 scenes: $(STAMP)
 	$(VENV)/bin/phrt scenes
