@@ -15,10 +15,8 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
   against the rays); beyond the largest item of the window, growing as rays ** ``MIN_EXPONENT``
   (an optimistic price: a fit on small items extrapolated at its own exponent priced atrium's oak,
-  never traced, at 40 ms against the oracle's 22-32, so it was never tried).  Items whose ms grow
-  slower than rays ** MIN_EXPONENT have a part that does not grow at all: a fixed part and a line
-  (Theil-Sen) instead.  Embree's ms a ray comes from batches of ``MIN_EMBREE_RAYS`` or more when
-  the replay has some (a small batch's is its calls' overhead).  Before such a spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
+  never traced, at 40 ms against the oracle's 22-32, so it was never tried).  Before such a
+  spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
   (the numpy work around a ray costs about twice Embree's own), the rest of the time an
   intercept paid once; the cost model's prior times ``UNMEASURED_MARGIN`` before the effect's
   first traced frame;
@@ -56,10 +54,6 @@ SPREAD = 1.5  # max/min ray count of the window before the line is fitted
 # inside Embree (a ratio, machine-independent to first order).
 EMBREE_FACTOR = 3.0
 MIN_PAIRS = 3  # pairs of frames SPREAD apart in rays before the power law is fitted
-# Embree's ms a ray is read from a batch of at least this many rays (its per-call overhead spread
-# thin: 160 rays of one small caster took 0.8 us a ray inside Embree, 1,000 rays 0.4, 36,000 0.19),
-# kept for the replay across revisions (a property of the machine, not of the scene's costs).
-MIN_EMBREE_RAYS = 1000
 # An item's ms grow as its rays to this power at least (1: linear).  Measured, atrium path1 at
 # 320x240, shadows beyond the lights' setup, one caster alone: 180 rays 1.0 ms, 840 rays 2.5 ms,
 # 22,000 rays 18 ms (the oracle's timing): about rays ** 0.6 (numpy's and Embree's per-call work
@@ -93,7 +87,6 @@ class ItemCosts:
         self._fit = {effect: _prior(effect) for effect in EFFECTS}
         self._pooled = np.ones(len(EFFECTS))
         self.reconstruction = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # ms per pixel
-        self.embree_per_ray = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # of batches >= MIN_EMBREE_RAYS
 
     # -- predictions -------------------------------------------------------------------------
     def fixed_ms(self) -> np.ndarray:
@@ -205,10 +198,7 @@ class ItemCosts:
                       float(np.count_nonzero(chosen[:, j])))
             self.samples[effect].append(sample)
             self.anchors[effect][_octave(rays / sample[4])] = sample
-            if rays >= MIN_EMBREE_RAYS and inside > 0:
-                self.embree_per_ray[effect].append(inside / rays)
-            known = float(np.median(self.embree_per_ray[effect])) if self.embree_per_ray[effect] else None
-            self._fit[effect] = _fit(self._window(effect), effect == "shadows", known)
+            self._fit[effect] = _fit(self._window(effect), effect == "shadows")
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
@@ -226,13 +216,12 @@ def _octave(rays_per_item: float) -> int:
     return int(np.floor(np.log(max(rays_per_item, 1.0)) / np.log(ANCHOR_BASE)))
 
 
-def _fit(samples, timed_setup: bool, embree_known=None) -> tuple[float, float, float, float, float]:
+def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]:
     """(fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
     (rays, ms, setup ms, Embree ms, items): an item of r rays costs max(scale x r ** exponent,
     Embree's ms a ray x r), growing as r ** MIN_EXPONENT beyond the largest item measured.  The
     timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
-    casters is not counted twice).  ``embree_known``: Embree's ms a ray in the replay's batches of
-    MIN_EMBREE_RAYS or more (None: none yet), used when the window holds no such batch."""
+    casters is not counted twice)."""
     data = np.asarray(samples, np.float64)
     rays, ms, setup, inside, items = data.T
     setup = setup if timed_setup else np.zeros_like(setup)
@@ -245,11 +234,6 @@ def _fit(samples, timed_setup: bool, embree_known=None) -> tuple[float, float, f
     apart = np.maximum(rays[i], rays[j]) >= SPREAD * np.minimum(rays[i], rays[j])
     largest = int(np.argmax(rays))
     embree = float(inside[largest] / rays[largest])
-    if rays[largest] < MIN_EMBREE_RAYS and embree_known is not None:
-        # A small batch's time inside Embree is mostly its calls' overhead (31 rays: 1.5 us a ray,
-        # 8x a large batch's), which the EMBREE_FACTOR line below would charge to every ray: the
-        # replay's own large batches say what a ray costs there.
-        embree = min(embree, float(embree_known))
     if np.any(apart):
         slope = float(np.median((inside[j] - inside[i])[apart] / (rays[j] - rays[i])[apart]))
         embree = float(np.clip(slope, 0.0, embree)) if slope > 0 else embree
@@ -259,20 +243,10 @@ def _fit(samples, timed_setup: bool, embree_known=None) -> tuple[float, float, f
     usable = (x > 0) & (y > 0)
     apart = (np.maximum(x[i], x[j]) >= SPREAD * np.minimum(x[i], x[j])) & usable[i] & usable[j]
     if np.count_nonzero(apart) >= MIN_PAIRS:
-        measured = float(np.median(np.log(y[j] / y[i])[apart] / np.log(x[j] / x[i])[apart]))
-        if measured >= MIN_EXPONENT:
-            exponent = min(measured, 1.0)
-            scale = float(np.median(y[usable] / x[usable] ** exponent))
-            return float(np.median(setup)), scale, exponent, embree, float(np.max(x[usable]))
-        # Flatter than the slowest growth measured: a part of an item's time does not grow with its
-        # rays (a reflection's bounce levels, no setup timer holds it), so a power law would fold
-        # it into every ray and price a larger item at several times its cost (atrium path3:
-        # reflections of 100-1,000 rays in 5-7 ms priced a 5,000-ray one at 40 ms).  A fixed part
-        # and a line instead (Theil-Sen: the median slope of the pairs, the median intercept).
-        slope = float(np.median((y[j] - y[i])[apart] / (x[j] - x[i])[apart]))
-        slope = max(slope, embree)
-        intercept = float(np.clip(np.median(y[usable] - slope * x[usable]), 0.0, float(np.min(y[usable]))))
-        return float(np.median(setup)) + intercept, slope, 1.0, embree, float(np.max(x[usable]))
+        exponent = float(np.clip(np.median(np.log(y[j] / y[i])[apart] / np.log(x[j] / x[i])[apart]),
+                                 MIN_EXPONENT, 1.0))
+        scale = float(np.median(y[usable] / x[usable] ** exponent))
+        return float(np.median(setup)), scale, exponent, embree, float(np.max(x[usable]))
     # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
     # fixed part paid once (its intercept).
     per_ray = EMBREE_FACTOR * embree

@@ -70,46 +70,8 @@ def test_an_item_never_costs_less_than_its_rays_inside_embree():
     for casters in ([180], [840], [180], [840]):
         power_frame(costs, casters, exponent=0.3, embree=1e-3)
     _, _, exponent, embree, _ = costs._fit["shadows"]
-    assert exponent == 1.0 and embree == pytest.approx(1e-3)  # flatter than MIN_EXPONENT: a line
+    assert exponent == pytest.approx(item_costs.MIN_EXPONENT) and embree == pytest.approx(1e-3)
     assert costs.predict(["Oak"], np.array([[1e6, 0, 0]]), [1.0])[0, 0] == pytest.approx(1e6 * 1e-3)
-
-
-def bounce_frame(costs, rays, fixed=4.5, per_ray=2.5e-3, embree=2e-4):
-    """One traced frame of one reflection item: a fixed part no setup timer holds, then a line."""
-    expected = np.array([[0.0, rays, 0.0]])
-    chosen = np.array([[False, True, False]])
-    costs.observe(["Statue"], expected, expected, chosen, chosen.astype(float), [0, fixed + per_ray * rays, 0],
-                  [0, rays, 0], embree_ms=[0, embree * rays, 0])
-
-
-def test_items_flatter_than_the_slowest_power_get_a_fixed_part_and_a_line():
-    """Reflections of 100 to 1,000 rays in 4.75 to 7 ms (4.5 ms of bounce levels whatever the rays):
-    a 5,000-ray reflection is about 4.5 + 12.5 ms, not the power law's 6-7 ms of a 100-ray item
-    grown as rays ** MIN_EXPONENT over every ray (atrium path3: 40 ms for 7 measured)."""
-    costs = ItemCosts()
-    for rays in (100, 400, 1000, 150, 700, 250):
-        bounce_frame(costs, rays)
-    fixed, per_ray, exponent, _, largest = costs._fit["reflections"]
-    assert exponent == 1.0 and fixed == pytest.approx(4.5, rel=1e-6) and per_ray == pytest.approx(2.5e-3, rel=1e-6)
-    assert costs.predict(["Statue"], np.array([[0.0, 700.0, 0.0]]), [1.0])[0, 1] + fixed == pytest.approx(
-        4.5 + 2.5e-3 * 700, rel=1e-6)
-    big = costs.predict(["Pool"], np.array([[0.0, 5000.0, 0.0]]), [1.0])[0, 1] + fixed
-    assert big <= 4.5 + 2.5e-3 * 5000 + 1e-9  # beyond the largest measured: no dearer than the line
-
-
-def test_a_small_batch_does_not_teach_embrees_ms_a_ray():
-    """Large batches measured Embree at 0.2 us a ray; after a revision, the window holds one batch
-    of 31 rays whose calls took 1.5 us a ray: a 5,000-ray caster is priced by the replay's large
-    batches (EMBREE_FACTOR x 0.2 us a ray), not 7.5x that."""
-    costs = ItemCosts()
-    for casters in ([4000], [6000]):
-        power_frame(costs, casters, exponent=1.0, scale=6e-4, embree=2e-4)
-    costs.samples["shadows"].clear()
-    costs.anchors["shadows"].clear()  # what a revision (tick) does
-    power_frame(costs, [31], exponent=1.0, scale=6e-4, embree=1.5e-3)
-    _, per_ray, _, embree, _ = costs._fit["shadows"]
-    assert embree == pytest.approx(2e-4) and per_ray == pytest.approx(item_costs.EMBREE_FACTOR * 2e-4)
-    assert costs.predict(["Oak"], np.array([[5000.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(5000 * 6e-4)
 
 
 def test_rays_ratio_is_learned_per_item_and_q_scales_the_cost():
