@@ -126,3 +126,27 @@ def test_forced_rates_per_element_or_for_all():
     assert arrays["shadows"].tolist() == [1.0, 0.25, 1.0]
     with pytest.raises(ValueError):
         forced_rates({"shadows": {"Oak": 0.3}}, names)
+
+
+def test_the_tool_says_when_the_ceiling_rules_the_target_out(monkeypatch, tmp_path, capsys):
+    """``tools/tiers_ceiling.py``: the table's verdict follows the ratio's interval (above 0.8: no
+    choice of rates reaches issue 23's target), and a folder with no evaluation is a one-line error."""
+    from pathlib import Path
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "tools"))
+    import tiers_ceiling as tool
+    rng = np.random.default_rng(1)
+    rows = []
+    for frame in range(40):
+        benefit = 0.02 + 0.002 * rng.random()
+        rows.append({"path": "far", "budget_at": 0.1, "frame": frame, "raster_flip": 0.021, "benefit_flip": benefit,
+                     "ceiling_flip": 0.97 * benefit})
+        rows.append({"path": "near", "budget_at": 0.5, "frame": frame, "raster_flip": 0.021, "benefit_flip": benefit,
+                     "ceiling_flip": 0.5 * benefit})
+    ratio, low, high = tool.ratio_interval([row["ceiling_flip"] for row in rows[::2]],
+                                           [row["benefit_flip"] for row in rows[::2]])
+    assert ratio == pytest.approx(0.97) and low <= ratio <= high
+    table = tool.markdown(rows).splitlines()
+    assert table[2].startswith("| far | 0.1 | 40 |") and table[2].endswith("| no |")
+    assert table[3].startswith("| near | 0.5 |") and table[3].endswith("| yes |")
+    assert tool.main(["--eval", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
