@@ -33,7 +33,7 @@ import numpy as np
 
 RUNS = ("measured", "benefit", "tiers")
 COLUMNS = ("path", "budget_at", "frame", "capacity_ms", "raster_flip", "oracle_flip") + tuple(
-    f"{run}_flip" for run in RUNS) + ("items_flip", "items_ms", "ceiling_flip", "ceiling_ms", "ceiling_refits",
+    f"{run}_flip" for run in RUNS) + ("items_flip", "items_ms", "items_refits", "ceiling_flip", "ceiling_ms", "ceiling_refits",
                                       "n_items", "ceiling")
 ITEM_COLUMNS = ("path", "frame", "element", "effect", "rate", "cost_ms", "overhead_ms", "benefit")
 BOOTSTRAP = 2000
@@ -91,18 +91,23 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
     gbuffer_of = {row["frame"]: row.get("gbuffer_ms") for row in steady.steady_rows(raster_rows)}
     runs = _runs(folder, label, plan)
     regret = _regret(folder)
-    budgets = {at: min(run["budget_ms"] for run in runs.values() if abs(run["budget_at"] - at) < 1e-9)
-               for at in budget_at}
+    budgets = {}
+    for at in budget_at:
+        found = [run["budget_ms"] for run in runs.values() if abs(run["budget_at"] - at) < 1e-9]
+        if not found:
+            raise LookupError(f"{label} has no hybrid run at {at:g} of the way (--budget-at)")
+        budgets[at] = min(found)  # never more time than a run it is compared with had
     frames = oracle.sampled_frames([row["frame"] for row in run_files.read_frames(reference_dir)], every)
     clock = oracle_fit.Clock()
-    rows = []
+    rows, warmed = [], False
     with ForcedRenderer(scene, camera, tuple(plan["resolution"])) as renderer, item_measure.ItemScope() as scope:
-        for count, frame in enumerate(frames):
+        for frame in frames:
             reference_path = run_files.frame_image_path(reference_dir, frame)
             if reference_path is None:
                 continue
             reference = metrics.read_image(reference_path)
-            if count == 0:  # warm-up: shaders, shadow maps, Embree scenes
+            if not warmed:  # warm-up: shaders, shadow maps, Embree scenes
+                warmed = True
                 renderer.render(frame, ())
                 _, _, warm = renderer.render(frame, ())
                 renderer.render(frame, competing_candidates(warm))
@@ -111,6 +116,9 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
                                                           for _ in range(oracle.TIMINGS - 1)]
             ratio = clock.observe(gbuffer, gbuffer_of.get(frame))
             flip_raster = metrics.flip(reference, raster)
+            shared = shared_of.get(frame)
+            if shared is None:  # no raster run's frame: the oracle's own, on the runs' clock
+                shared = (float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)) / ratio
             names = competing_candidates(selection)
             index = {name: position for position, name in enumerate(selection.names)}
             elements = selection.elements
@@ -118,12 +126,14 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
                      if bool(np.asarray(getattr(elements, effect))[index[name]])]
             cost = np.full((len(items), len(RATES)), np.inf)
             benefit = np.zeros((len(items), len(RATES)))
+            flips = np.zeros((len(items), len(RATES)))
             for row, (element, effect) in enumerate(items):
                 for option, rate in enumerate(RATES):
                     traced = item_measure.measure_subset(
                         AtRates(renderer, {effect: {element: rate}}), frame,
                         scope.trace_only({element: (effect,)}), reference)
                     cost[row, option] = traced.trace_ms / ratio
+                    flips[row, option] = traced.flip
                     benefit[row, option] = flip_raster - traced.flip
             overhead = 0.0
             if len(items) > 1:  # all together at full rate: the trace stage's fixed part, paid once
@@ -131,7 +141,7 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
                 together = item_measure.measure_subset(renderer, frame, names, reference)
                 overhead = oracle.trace_overhead_ms(cost[:, -1], together.trace_ms / ratio)
             found = tiers_ceiling.TierCandidates(frame=frame, items=items, rates=tuple(RATES),
-                                                 cost_ms=cost - overhead, benefit=benefit,
+                                                 cost_ms=np.maximum(cost - overhead, 0.0), benefit=benefit,
                                                  flip_raster=flip_raster, overhead_ms=overhead)
             item_rows += [{"path": label, "frame": frame, "element": element, "effect": effect, "rate": rate,
                            "cost_ms": found.cost_ms[row, option], "overhead_ms": overhead,
@@ -139,7 +149,13 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
                           for row, (element, effect) in enumerate(items) for option, rate in enumerate(RATES)]
             full_only = np.zeros(cost.shape, bool)
             full_only[:, -1] = True
-            rendered = {frozenset(): (0.0, flip_raster)}
+            # What each choice may fall back on (feasible_choice): subsets measured, those of full-rate
+            # items only for the items' choice (the ceiling may take them too).
+            singles = {frozenset([(*item, rate)]): (float(cost[row, option]), float(flips[row, option]))
+                       for row, item in enumerate(items) for option, rate in enumerate(RATES)}
+            full_rate = {frozenset(): (0.0, flip_raster)}
+            full_rate.update({chosen: value for chosen, value in singles.items() if next(iter(chosen))[2] == 1.0})
+            rendered = {**full_rate, **singles}
 
             def measure(chosen):
                 effects_of, rates = {}, {}
@@ -151,14 +167,18 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
                 return traced.trace_ms / ratio, traced.flip
 
             for at, budget in budgets.items():
-                capacity = oracle.nominal_time_left(budget, shared_of.get(frame))
+                capacity = oracle.nominal_time_left(budget, shared)
                 found.allowed = full_only
-                chosen_items, _ = oracle_fit.feasible_choice(found, capacity, budget, measure, rendered)
+                chosen_items, items_refits = oracle_fit.feasible_choice(found, capacity, budget, measure, full_rate)
                 found.allowed = None
+                rendered.update(full_rate)
                 ceiling, refits = oracle_fit.feasible_choice(found, capacity, budget, measure, rendered)
+                full_rate.update({chosen: value for chosen, value in rendered.items()
+                                  if all(rate == 1.0 for _, _, rate in chosen)})
                 row = {"path": label, "budget_at": at, "frame": frame, "capacity_ms": capacity,
-                       "raster_flip": flip_raster, "items_flip": rendered[chosen_items][1],
-                       "items_ms": rendered[chosen_items][0], "ceiling_flip": rendered[ceiling][1],
+                       "raster_flip": flip_raster, "items_flip": full_rate[chosen_items][1],
+                       "items_ms": full_rate[chosen_items][0], "items_refits": items_refits,
+                       "ceiling_flip": rendered[ceiling][1],
                        "ceiling_ms": rendered[ceiling][0], "ceiling_refits": refits, "n_items": len(items),
                        "ceiling": ";".join(f"{element}:{effect}@{rate:g}" for element, effect, rate in sorted(ceiling))}
                 for run_id, run in runs.items():
@@ -229,7 +249,11 @@ def main(argv=None) -> int:
     budget_at = [float(value) for value in args.budget_at.split(",")]
     rows, item_rows = [], []
     for path in paths:
-        rows += measure_path(path, args.every, budget_at, lambda text: print(text, flush=True), item_rows)
+        try:
+            rows += measure_path(path, args.every, budget_at, lambda text: print(text, flush=True), item_rows)
+        except LookupError as error:
+            print(f"tiers-ceiling: {error}", file=sys.stderr)
+            return 2
         for name, columns, written in (("tiers_ceiling_frames.csv", COLUMNS, rows),
                                        ("tiers_ceiling_items.csv", ITEM_COLUMNS, item_rows)):
             with open(out / name, "w", newline="") as handle:

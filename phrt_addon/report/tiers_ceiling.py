@@ -5,8 +5,8 @@ item of a sampled frame is traced alone at every rate of ``trace.rates.RATES`` (
 tiers_ceiling.py`` renders them), and :meth:`TierCandidates.choose` picks at most one rate per item,
 exactly, within the frame's time for tracing: the multiple-choice knapsack solved by meet in the
 middle (every combination of each half's options, the second half's best value per cost found by
-binary search), exact up to ``EXACT_ITEMS`` items, ``knapsack.solve_choices`` (within its bound)
-beyond.  The trace stage's fixed part is paid once, as the oracle's ``FrameCandidates`` does, so
+binary search), exact up to ``EXACT_COMBINATIONS`` combinations a half (20 items of three
+rates), ``knapsack.solve_choices`` (binned, within its bound) beyond.  The trace stage's fixed part is paid once, as the oracle's ``FrameCandidates`` does, so
 ``oracle_fit.feasible_choice`` holds the chosen combination to its measured time the same way.
 """
 from __future__ import annotations
@@ -18,13 +18,13 @@ import numpy as np
 from ..select import knapsack
 from .oracle import MIN_BENEFIT
 
-EXACT_ITEMS = 16  # 4 options an item: 4^8 = 65,536 combinations a half
+EXACT_COMBINATIONS = 1 << 21  # a half's combinations at most (20 items of 3 rates: 4^10 a half)
 
 
 def _half(values, costs):
     """(value, cost, picks) of every combination of one half's options (-1: the item not traced)."""
     total_value, total_cost = np.zeros(1), np.zeros(1)
-    picks = np.zeros((1, 0), np.int64)
+    picks = np.zeros((1, 0), np.int8)
     for row_values, row_costs in zip(values, costs):
         options = np.flatnonzero(np.isfinite(row_costs) & (row_values > 0))
         option_values = np.r_[0.0, row_values[options]]
@@ -32,14 +32,34 @@ def _half(values, costs):
         total_value = (total_value[:, None] + option_values[None, :]).ravel()
         total_cost = (total_cost[:, None] + option_costs[None, :]).ravel()
         picks = np.concatenate([np.repeat(picks, len(option_values), axis=0),
-                                np.tile(np.r_[-1, options], len(picks))[:, None]], axis=1)
+                                np.tile(np.r_[-1, options].astype(np.int8), len(picks))[:, None]], axis=1)
     return total_value, total_cost, picks
+
+
+def _middle(costs) -> int:
+    """Where to split the items so the halves' numbers of combinations are as even as can be."""
+    sizes = np.log(1.0 + np.count_nonzero(np.isfinite(costs), axis=1))
+    cumulative = np.r_[0.0, np.cumsum(sizes)]
+    return int(np.argmin(np.abs(cumulative - cumulative[-1] / 2.0)))
+
+
+def exact_size(costs) -> bool:
+    """Whether the meet in the middle over ``costs`` (inf: an option never taken) is within
+    ``EXACT_COMBINATIONS`` a half."""
+    costs = np.asarray(costs, np.float64)
+    if len(costs) == 0:
+        return True
+    middle = _middle(costs)
+    sizes = 1.0 + np.count_nonzero(np.isfinite(costs), axis=1)
+    return float(np.prod(sizes[:middle])) <= EXACT_COMBINATIONS and \
+        float(np.prod(sizes[middle:])) <= EXACT_COMBINATIONS
 
 
 def exact_choices(values, costs, capacity: float) -> np.ndarray:
     """(n,) the option index picked per item (-1: none) maximising the summed ``values`` (n, k)
     with summed ``costs`` (n, k) <= ``capacity``; among equal values the cheaper combination.
-    Exact for up to ``EXACT_ITEMS`` items (meet in the middle), ``knapsack.solve_choices`` beyond."""
+    Exact (meet in the middle) while each half has at most ``EXACT_COMBINATIONS`` combinations of
+    its usable options, ``knapsack.solve_choices`` (binned, within its bound) beyond."""
     values = np.nan_to_num(np.asarray(values, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
     costs = np.nan_to_num(np.asarray(costs, np.float64), nan=np.inf, posinf=np.inf, neginf=np.inf)
     n = len(values)
@@ -47,10 +67,12 @@ def exact_choices(values, costs, capacity: float) -> np.ndarray:
     capacity = float(capacity)
     if n == 0 or not capacity >= 0:
         return picked
+    slack = 1e-12 * capacity  # sums in another order than the caller's may differ by an ulp
     costs = np.where(costs < 0, 0.0, costs)
-    if n > EXACT_ITEMS:
+    costs = np.where((costs <= capacity + slack) & (values > 0), costs, np.inf)  # options that may be taken
+    if not exact_size(costs):
         return np.asarray(knapsack.solve_choices(values, costs, capacity), np.int64)
-    middle = n // 2
+    middle = _middle(costs)
     value_a, cost_a, picks_a = _half(values[:middle], costs[:middle])
     value_b, cost_b, picks_b = _half(values[middle:], costs[middle:])
     order = np.lexsort((-value_b, cost_b))  # by cost, the best value first among equal costs
@@ -60,8 +82,8 @@ def exact_choices(values, costs, capacity: float) -> np.ndarray:
     improves = np.r_[True, value_b[1:] > best_b[:-1]]
     where_best[improves] = np.flatnonzero(improves)
     where_best = np.maximum.accumulate(where_best)
-    fits = cost_a <= capacity
-    room = capacity - cost_a[fits]
+    fits = cost_a <= capacity + slack
+    room = capacity + slack - cost_a[fits]
     last = np.searchsorted(cost_b, room, side="right") - 1  # cost_b[0] == 0: always >= 0
     totals = value_a[fits] + best_b[last]
     spent = cost_a[fits] + cost_b[where_best[last]]

@@ -309,6 +309,9 @@ def forced_rates(forced, names):
     arrays = {}
     for effect, rate in forced.items():
         if isinstance(rate, dict):
+            unknown = sorted(set(rate) - set(names))
+            if unknown:  # a misspelt name would quietly trace at full rate
+                raise ValueError(f"forced {effect} rate for elements not in the frame: {', '.join(map(str, unknown))}")
             arrays[effect] = np.array([check_rate(rate.get(name, 1.0)) for name in names], np.float64)
         else:
             arrays[effect] = np.full(len(names), check_rate(rate))
