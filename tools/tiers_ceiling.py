@@ -99,26 +99,15 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
         budgets[at] = min(found)  # never more time than a run it is compared with had
     frames = oracle.sampled_frames([row["frame"] for row in run_files.read_frames(reference_dir)], every)
     clock = oracle_fit.Clock()
-    rows, warmed = [], False
+    rows = []
     with ForcedRenderer(scene, camera, tuple(plan["resolution"])) as renderer, item_measure.ItemScope() as scope:
         for frame in frames:
             reference_path = run_files.frame_image_path(reference_dir, frame)
             if reference_path is None:
                 continue
             reference = metrics.read_image(reference_path)
-            if not warmed:  # warm-up: shaders, shadow maps, Embree scenes
-                warmed = True
-                renderer.render(frame, ())
-                _, _, warm = renderer.render(frame, ())
-                renderer.render(frame, competing_candidates(warm))
-            raster, raster_stats, selection = renderer.render(frame, ())
-            gbuffer = [raster_stats.get("gbuffer_ms")] + [renderer.render(frame, ())[1].get("gbuffer_ms")
-                                                          for _ in range(oracle.TIMINGS - 1)]
-            ratio = clock.observe(gbuffer, gbuffer_of.get(frame))
-            flip_raster = metrics.flip(reference, raster)
-            shared = shared_of.get(frame)
-            if shared is None:  # no raster run's frame: the oracle's own, on the runs' clock
-                shared = (float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)) / ratio
+            base = renderer.raster_frame(frame, reference, clock, gbuffer_of, shared_of)  # the oracle's clock
+            selection, ratio, flip_raster, shared = base.selection, base.ratio, base.flip, base.shared_ms
             names = competing_candidates(selection)
             index = {name: position for position, name in enumerate(selection.names)}
             elements = selection.elements

@@ -8,6 +8,7 @@ chosen elements are traced instead of the heuristic's.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
@@ -17,6 +18,18 @@ from ...phrt_addon.report import metrics, oracle, oracle_fit
 from ...phrt_addon.runs import run_files, steady
 from .. import extract, final
 from . import item_measure
+
+
+@dataclass
+class RasterFrame:
+    """A sampled frame with nothing traced, measured against the runs (``ForcedRenderer.raster_frame``)."""
+
+    image: np.ndarray
+    stats: dict
+    selection: object
+    ratio: float  # the clock ratio its timings are divided by (``oracle_fit.Clock``)
+    flip: float  # its LDR-FLIP against the reference
+    shared_ms: float  # what every variant spends on the frame whatever it selects, on the runs' clock
 
 
 class ForcedRenderer:
@@ -29,6 +42,7 @@ class ForcedRenderer:
     def __init__(self, scene, camera, resolution=None):
         self.scene, self.camera, self.resolution = scene, camera, resolution
         self.state = None
+        self.warmed = False
 
     def __enter__(self):
         scene, render = self.scene, self.scene.render
@@ -53,6 +67,27 @@ class ForcedRenderer:
         render.engine = saved["engine"]
         render.resolution_x, render.resolution_y, render.resolution_percentage = saved["res"]
         return False
+
+    def raster_frame(self, frame, reference, clock, gbuffer_of, shared_of) -> RasterFrame:
+        """``frame`` with nothing traced, its LDR-FLIP against ``reference``, and the machine's speed
+        now against the runs' on it (its G-buffer pass timed ``oracle.TIMINGS`` times against the
+        runs' raster run's ``gbuffer_of`` {frame: ms}, observed by ``clock``).  Its shared time is
+        ``shared_of`` {frame: ms} (the raster run's), else its own raster and composite on the runs'
+        clock.  The first call warms up (shaders, shadow maps and Embree scenes built, not timed)."""
+        if not self.warmed:
+            self.warmed = True
+            self.render(frame, ())
+            _, _, warm = self.render(frame, ())
+            self.render(frame, competing_candidates(warm))
+        image, stats, selection = self.render(frame, ())
+        gbuffer = [stats.get("gbuffer_ms")] + [self.render(frame, ())[1].get("gbuffer_ms")
+                                               for _ in range(oracle.TIMINGS - 1)]
+        ratio = clock.observe(gbuffer, gbuffer_of.get(frame))
+        shared = shared_of.get(frame)
+        if shared is None:  # no raster run's frame: the oracle's own, on the runs' clock
+            shared = (float(stats["raster_ms"]) + float(stats.get("composite_ms") or 0.0)) / ratio
+        return RasterFrame(image=image, stats=stats, selection=selection, ratio=ratio,
+                           flip=metrics.flip(reference, image), shared_ms=shared)
 
     def render(self, frame, names, rates=None):
         """``rates``: per effect name the rate (``trace.rates.RATES``) every traced element's effect
@@ -117,20 +152,9 @@ def run_oracle(scene, camera, reference_dir, hybrid_dirs, out_dir, *, raster_dir
             if reference_path is None:
                 continue
             reference = metrics.read_image(reference_path)
-            if count == 0:  # warm-up: shaders, shadow maps and Embree scenes are built once, not timed here
-                renderer.render(frame, ())
-                _, _, warm = renderer.render(frame, ())
-                renderer.render(frame, competing_candidates(warm))
-            raster, raster_stats, selection = renderer.render(frame, ())
-            # The machine's speed now against the runs' on this frame (the G-buffer pass, 3 timings):
-            # the frame's timings are divided by the ratio of the last few frames (``oracle_fit.Clock``).
-            gbuffer = [raster_stats.get("gbuffer_ms")] + [renderer.render(frame, ())[1].get("gbuffer_ms")
-                                                          for _ in range(oracle.TIMINGS - 1)]
-            ratio = clock.observe(gbuffer, gbuffer_of.get(frame))
-            flip_raster = metrics.flip(reference, raster)
-            shared = shared_of.get(frame)
-            if shared is None:  # no raster run: the oracle's own frame, on the runs' clock
-                shared = (float(raster_stats["raster_ms"]) + float(raster_stats.get("composite_ms") or 0.0)) / ratio
+            # The frame's timings are divided by the clock ratio of the last few frames (``oracle_fit.Clock``).
+            base = renderer.raster_frame(frame, reference, clock, gbuffer_of, shared_of)
+            selection, ratio, flip_raster, shared = base.selection, base.ratio, base.flip, base.shared_ms
             competing = competing_candidates(selection)
             names, cut = oracle.cap_candidates(competing, _relevance(selection, competing), seed=frame)
             if cut:
