@@ -39,16 +39,6 @@ ITEM_COLUMNS = ("path", "frame", "element", "effect", "rate", "cost_ms", "overhe
 BOOTSTRAP = 2000
 
 
-class AtRates:
-    """The renderer with ``rates`` forced ({effect: {element: rate}}), as ``measure_subset`` calls it."""
-
-    def __init__(self, renderer, rates):
-        self.renderer, self.rates = renderer, rates
-
-    def render(self, frame, names):
-        return self.renderer.render(frame, names, self.rates)
-
-
 def _runs(folder: Path, label: str, plan: dict) -> dict:
     runs = {}
     for job in plan["jobs"]:
@@ -118,9 +108,8 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
             flips = np.zeros((len(items), len(RATES)))
             for row, (element, effect) in enumerate(items):
                 for option, rate in enumerate(RATES):
-                    traced = item_measure.measure_subset(
-                        AtRates(renderer, {effect: {element: rate}}), frame,
-                        scope.trace_only({element: (effect,)}), reference)
+                    traced = item_measure.measure_subset(renderer, frame, scope.trace_only({element: (effect,)}),
+                                                         reference, rates={effect: {element: rate}})
                     cost[row, option] = traced.trace_ms / ratio
                     flips[row, option] = traced.flip
                     benefit[row, option] = flip_raster - traced.flip
@@ -151,8 +140,8 @@ def measure_path(folder: Path, every: int, budget_at: list, log, item_rows: list
                 for element, effect, rate in chosen:
                     effects_of.setdefault(element, []).append(effect)
                     rates.setdefault(effect, {})[element] = rate
-                traced = item_measure.measure_subset(AtRates(renderer, rates), frame,
-                                                     scope.trace_only(effects_of), reference)
+                traced = item_measure.measure_subset(renderer, frame, scope.trace_only(effects_of), reference,
+                                                     rates=rates)
                 return traced.trace_ms / ratio, traced.flip
 
             for at, budget in budgets.items():

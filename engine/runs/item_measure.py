@@ -42,15 +42,17 @@ class Measured:
     selection: object
 
 
-def measure_subset(renderer, frame, names, reference=None, *, timings=oracle.TIMINGS, per_pixel=False) -> Measured:
+def measure_subset(renderer, frame, names, reference=None, *, timings=oracle.TIMINGS, per_pixel=False,
+                   rates=None) -> Measured:
     """Render ``frame`` with ``names`` traced ``timings`` times (the oracle's ``TIMINGS``: one timing
     hands the measurement the luckiest of them, a winner's curse; the images are the same: the first
     is kept) and measure it against ``reference`` (linear RGB, top row first): the median and spread
-    of the timings (``oracle.median_ms``) and the LDR-FLIP."""
-    image, stats, selection = renderer.render(frame, names)
+    of the timings (``oracle.median_ms``) and the LDR-FLIP.  ``rates``: the forced rates
+    (``ForcedRenderer.render``; None: full rate)."""
+    image, stats, selection = renderer.render(frame, names, rates)
     measured = [trace_ms(stats)]
     for _ in range(max(int(timings), 1) - 1):
-        measured.append(trace_ms(renderer.render(frame, names)[1]))
+        measured.append(trace_ms(renderer.render(frame, names, rates)[1]))
     error = error_map = None
     if reference is not None:
         error = metrics.flip(reference, image)

@@ -6,8 +6,9 @@ tiers_ceiling.py`` renders them), and :meth:`TierCandidates.choose` picks at mos
 exactly, within the frame's time for tracing: the multiple-choice knapsack solved by meet in the
 middle (every combination of each half's options, the second half's best value per cost found by
 binary search), exact up to ``EXACT_COMBINATIONS`` combinations a half (20 items of three
-rates), ``knapsack.solve_choices`` (binned, within its bound) beyond.  The trace stage's fixed part is paid once, as the oracle's ``FrameCandidates`` does, so
-``oracle_fit.feasible_choice`` holds the chosen combination to its measured time the same way.
+rates), ``knapsack.solve_choices`` (binned, within its bound) beyond.  The trace stage's fixed
+part is paid once, as the oracle's ``FrameCandidates`` does, so ``oracle_fit.feasible_choice``
+holds the chosen combination to its measured time the same way.
 """
 from __future__ import annotations
 
@@ -43,16 +44,21 @@ def _middle(costs) -> int:
     return int(np.argmin(np.abs(cumulative - cumulative[-1] / 2.0)))
 
 
-def exact_size(costs) -> bool:
-    """Whether the meet in the middle over ``costs`` (inf: an option never taken) is within
-    ``EXACT_COMBINATIONS`` a half."""
+def _exact_middle(costs):
+    """The split of the meet in the middle over ``costs`` (inf: an option never taken), None when a
+    half would have more than ``EXACT_COMBINATIONS`` combinations."""
     costs = np.asarray(costs, np.float64)
     if len(costs) == 0:
-        return True
+        return 0
     middle = _middle(costs)
     sizes = 1.0 + np.count_nonzero(np.isfinite(costs), axis=1)
-    return float(np.prod(sizes[:middle])) <= EXACT_COMBINATIONS and \
-        float(np.prod(sizes[middle:])) <= EXACT_COMBINATIONS
+    fits = max(float(np.prod(sizes[:middle])), float(np.prod(sizes[middle:]))) <= EXACT_COMBINATIONS
+    return middle if fits else None
+
+
+def exact_size(costs) -> bool:
+    """Whether the meet in the middle over ``costs`` is within ``EXACT_COMBINATIONS`` a half."""
+    return _exact_middle(costs) is not None
 
 
 def exact_choices(values, costs, capacity: float) -> np.ndarray:
@@ -70,9 +76,9 @@ def exact_choices(values, costs, capacity: float) -> np.ndarray:
     slack = 1e-12 * capacity  # sums in another order than the caller's may differ by an ulp
     costs = np.where(costs < 0, 0.0, costs)
     costs = np.where((costs <= capacity + slack) & (values > 0), costs, np.inf)  # options that may be taken
-    if not exact_size(costs):
+    middle = _exact_middle(costs)
+    if middle is None:
         return np.asarray(knapsack.solve_choices(values, costs, capacity), np.int64)
-    middle = _middle(costs)
     value_a, cost_a, picks_a = _half(values[:middle], costs[:middle])
     value_b, cost_b, picks_b = _half(values[middle:], costs[middle:])
     order = np.lexsort((-value_b, cost_b))  # by cost, the best value first among equal costs

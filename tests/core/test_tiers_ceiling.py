@@ -23,11 +23,15 @@ def brute_force(values, costs, capacity):
     return best, best_cost
 
 
-instances = st.integers(0, 6).flatmap(lambda n: st.tuples(
-    st.lists(st.lists(st.floats(0.0, 10.0), min_size=3, max_size=3), min_size=n, max_size=n),
-    st.lists(st.lists(st.one_of(st.floats(0.0, 20.0), st.just(float("inf"))), min_size=3, max_size=3),
-             min_size=n, max_size=n),
-    st.floats(0.0, 60.0)))
+def choice_instances(max_items, value, cost, capacity):
+    """(values (n, 3), costs (n, 3), capacity) of up to ``max_items`` items of 3 options."""
+    def rows(n, number):
+        return st.lists(st.lists(number, min_size=3, max_size=3), min_size=n, max_size=n)
+    return st.integers(0, max_items).flatmap(lambda n: st.tuples(rows(n, value), rows(n, cost), capacity))
+
+
+instances = choice_instances(6, st.floats(0.0, 10.0), st.one_of(st.floats(0.0, 20.0), st.just(float("inf"))),
+                             st.floats(0.0, 60.0))
 
 
 @settings(max_examples=300, deadline=None)
@@ -45,10 +49,7 @@ def test_exact_against_brute_force(instance):
     assert value == pytest.approx(best, abs=1e-9)
 
 
-whole = st.integers(0, 5).flatmap(lambda n: st.tuples(
-    st.lists(st.lists(st.integers(0, 6), min_size=3, max_size=3), min_size=n, max_size=n),
-    st.lists(st.lists(st.integers(0, 9), min_size=3, max_size=3), min_size=n, max_size=n),
-    st.integers(0, 30)))
+whole = choice_instances(5, st.integers(0, 6), st.integers(0, 9), st.integers(0, 30))
 
 
 @settings(max_examples=200, deadline=None)
