@@ -7,14 +7,14 @@ Items
     Every tagged effect of a visible candidate within the area limit is one item: a glass
     ball can buy its refraction without its shadow.
 Value
-    Expected reduction of error: the pixels the effect changes (the element's own pixels for
-    reflections and refractions, its shadow footprint on receivers for shadows) times a
-    per-pixel difference between the traced and the raster image, times K (the designer's
-    priority).  The per-pixel difference is learned on frames where the item was traced (the
-    GPU measures it beside the image, ``item_benefit.measure``), pulled back towards its prior
-    by ``DECAY`` on each frame it is visible but not traced (the view changed since), and
-    before its first measurement is a prior from the materials under its pixels
-    (``item_benefit.priors``).
+    Expected reduction of error: the pixels the effect changes (own pixels for reflections and
+    refractions, the shadow footprint on receivers for shadows) x a per-pixel difference between
+    the traced and the raster image x K (the designer's priority) x the effect's LDR-FLIP per unit
+    of change (``prior_scale.EFFECT_WEIGHT``).  The difference is learned on frames where the item
+    was traced (the GPU measures it beside the image, ``item_benefit.measure``), pulled back to its
+    prior by ``DECAY`` on each frame it is visible but not traced (the view changed), and before
+    its first measurement is a prior from the materials under its pixels (``item_benefit.priors``)
+    scaled per effect to what the scene's traced items measure (``prior_scale.PriorScale``).
 Exploration
     An item never measured gains a bonus that grows with the frames it waited, visible:
     after ``EXPLORE_FRAMES`` such frames it is worth more than every other item together, so
@@ -67,6 +67,7 @@ from .flip_guard import FLIP_GAP, FlipGuard  # noqa: F401
 from .frame_time import (AIM_OVER, AIM_RANGE, AIM_SHARE, AIM_STEP, MARGIN_FRAMES, STEADY_FRAMES,  # noqa: F401
                          STEADY_QUANTILE, FrameTime, MeasureCost)
 from .item_choice import ItemChoice
+from .prior_scale import PriorScale
 from ..finite import finite
 from ..schema import EFFECTS
 
@@ -128,6 +129,7 @@ class BenefitSelector:
         self.time = FrameTime()  # the margin, the steady time left, the aim
         self.measure_cost = MeasureCost()
         self.measured_frame = -MEASURE_STALE  # the frame index of the last measurement
+        self.prior_scale = PriorScale()  # the priors' scale, each effect's weight (fitted, learned)
 
     def _keys(self, names) -> list:
         """:func:`_item_keys`, kept while the element names stay those of the last frame."""
@@ -176,7 +178,7 @@ class BenefitSelector:
         eligible = np.asarray(eligible, bool)
         visible = eligible.any(axis=1) if visible is None else np.asarray(visible, bool).reshape(len(names))
         per_pixel, fresh = self.per_pixel(names, priors, eligible)
-        value = np.asarray(pixels, np.float64) * per_pixel * np.asarray(priority, np.float64)[:, None]
+        value = np.asarray(pixels, np.float64) * per_pixel * np.outer(priority, self.prior_scale.weight)
         value = np.where(eligible, np.clip(finite(value, nan=0.0, posinf=MAX_VALUE), 0.0, MAX_VALUE), 0.0)
         cost = np.clip(finite(cost_ms, nan=np.inf, posinf=np.inf), 0.0, np.inf)
         self.frames += 1
@@ -314,6 +316,8 @@ class BenefitSelector:
             measuring = eligible & chosen & (pixels > 0)
         else:
             seen_all, measuring = None, np.zeros(eligible.shape, bool)
+        if seen_all is not None:  # the priors' scale learns from the full-rate measurements
+            self.prior_scale.observe(seen_all, measuring, priors, rates.reshape(eligible.shape) == 1.0)
         rest = np.flatnonzero((eligible & ~chosen).ravel())
         rest_keys = [keys[k] for k in rest]
         known = np.fromiter(map(self.estimates.__contains__, rest_keys), bool, count=len(rest_keys))
@@ -350,14 +354,17 @@ class BenefitSelector:
         return any(names[i] not in self.prior_cache for i in np.flatnonzero(visible_candidates))
 
     def priors(self, names, computed=None) -> np.ndarray:
-        """(n, 3) priors: ``computed`` this frame (and cached), else the cached ones (0 where none)."""
+        """(n, 3) priors: ``computed`` this frame (and cached), else the cached ones (0 where none),
+        times the scale per effect (``prior_scale``: fitted on the training paths, learned in the
+        replay)."""
         if computed is not None:
             computed = np.asarray(computed, np.float64)
             self.prior_cache.update({name: computed[i].copy() for i, name in enumerate(names)})
             self.priors_at = self.frames
-            return computed
+            return self.prior_scale.apply(computed)
         zero = np.zeros(len(EFFECTS))
-        return np.array([self.prior_cache.get(name, zero) for name in names], np.float64).reshape(len(names), 3)
+        cached = np.array([self.prior_cache.get(name, zero) for name in names], np.float64).reshape(len(names), 3)
+        return self.prior_scale.apply(cached)
 
     def wants_measurement(self, names, choice: ItemChoice, frame_index: int) -> bool:
         """Whether this traced frame measures what its items changed (see MEASURE_EVERY); a yes

@@ -205,10 +205,11 @@ def test_the_material_priors_are_computed_only_when_an_item_has_none_or_they_are
     visible = np.array([True, False])
     assert selector.needs_priors(["A", "B"], visible)
     priors = selector.priors(["A", "B"], np.array([[0.0, 0.3, 0.0], [0.02, 0.0, 0.0]]))
-    assert priors[0, 1] == 0.3
+    scale = selector.prior_scale.scale  # the materials' guess, scaled per effect
+    assert priors[0, 1] == pytest.approx(0.3 * scale[1])
     selector.frames += 1
     assert not selector.needs_priors(["A", "B"], visible)
-    assert selector.priors(["A", "B"])[1, 0] == 0.02  # cached
+    assert selector.priors(["A", "B"])[1, 0] == pytest.approx(0.02 * scale[0])  # cached
     assert selector.needs_priors(["A", "C"], np.array([False, True]))  # C has none
     selector.frames += benefit_selection.PRIOR_EVERY
     assert selector.needs_priors(["A", "B"], visible)  # old
