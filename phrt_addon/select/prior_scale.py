@@ -21,13 +21,17 @@ pixels) while the traced shadow changes a few hundred.  An item never traced, or
 estimate decays towards its prior while it is not traced, was valued by that guess: arcade's
 shadows 40-140x too high against the LDR-FLIP their tracing removes.
 
-Two corrections, both per effect:
+Two corrections of the priors, both per effect:
 
 - ``FITTED``: the geometric mean of the training paths' medians (above), applied from the first
   frame (the judged paths are not in it);
 - a scale learned in the replay: the median of measured / prior over the last ``WINDOW``
   measurements of the effect's items (full rate, prior > 0), from ``MIN_SAMPLES`` on, within
   ``RANGE`` of the fitted prior.
+
+And one of the value: a unit of measured change removes more LDR-FLIP as a shadow than as a
+reflection, and less as a refraction (``EFFECT_WEIGHT``, fitted on the same paths), so the
+selection weights each item's value by its effect's.
 
 Plain numpy, no ``bpy``.
 """
