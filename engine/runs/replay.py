@@ -301,8 +301,14 @@ class ReplayRun:
             raise ValueError("ReplayRun: already finished")
         cancelled = bool(cancelled and self.remaining)
         problems = self.problem_lines()
-        written = self._close(summary={**self._run_facts(), "cancelled": cancelled, "partial": bool(self.remaining)},
-                              restore_scene=restore_scene and self.restores_scene)
+        try:
+            written = self._close(summary={**self._run_facts(), "cancelled": cancelled,
+                                           "partial": bool(self.remaining)},
+                                  restore_scene=restore_scene and self.restores_scene)
+        except OSError as error:  # the last summary.json did not fit: the one before stays, partial
+            raise ReplayError(f"cannot write the run's summary in '{self.run_dir}': {error.strerror or error} "
+                              f"(is the disk full?); its {self.done} frames are complete, the summary "
+                              f"written before says fewer") from None
         return ReplayResult(run_dir=self.run_dir, mode=self.mode, frames_done=self.done,
                             cancelled=cancelled, summary=written, problems=problems)
 
