@@ -48,3 +48,12 @@ def fresh_caches(blender):
     final.release_caches()
     yield
     final.release_caches()
+
+
+@pytest.fixture
+def closing():
+    """``closing(scene)``: the Embree scenes (``TraceScene``) a test built, closed after it."""
+    scenes = []
+    yield scenes.append
+    for scene in scenes:
+        scene.close()

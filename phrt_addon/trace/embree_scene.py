@@ -279,8 +279,7 @@ class TraceScene:
         sets = self.sets()
         if not sets:
             return ray_epsilon(points_trace, self.extent, view_distance)
-        offsets = np.array([s.offset for s in sets])
-        extents = np.array([s.extent for s in sets])
+        offsets, extents = self._set_frames(sets)
         if set_index is None and element is not None:
             element = np.asarray(element, np.int64) + 1
             known = (element >= 0) & (element < len(self._element_set))
@@ -294,6 +293,14 @@ class TraceScene:
             set_index[unknown] = np.argmin(distance, axis=1)
         local = points_trace - np.take(offsets, set_index, axis=0)  # rows: faster than offsets[set_index]
         return ray_epsilon(local, extents[set_index], view_distance)
+
+    def _set_frames(self, sets):
+        """The sets' offsets (k, 3) and extents (k,) as arrays, made again when the sets change."""
+        kept = getattr(self, "_frames_of", ())  # the sets themselves: their ids cannot be reused
+        if len(kept) != len(sets) or any(a is not b for a, b in zip(kept, sets)):
+            self._frames_of = tuple(sets)
+            self._frames = (np.array([s.offset for s in sets]), np.array([s.extent for s in sets]))
+        return self._frames
 
     # -- queries ------------------------------------------------------------
     def _run(self, scene, origins, directions, **kwargs):
@@ -325,7 +332,9 @@ class TraceScene:
         result = np.zeros(len(origins), bool)
         if len(origins) == 0:
             return result
-        dists = np.minimum(np.nan_to_num(max_distance, nan=0.0, posinf=1e30), 1e30).astype(np.float32)
+        dists = np.minimum(np.asarray(max_distance, np.float64).reshape(-1), 1e30)  # +inf: 1e30; -inf stays
+        dists[np.isnan(dists)] = 0.0
+        dists = dists.astype(np.float32)
         for embree_set in self.sets():
             if not embree_set.casts_shadow or embree_set.empty:
                 continue

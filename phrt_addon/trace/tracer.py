@@ -46,7 +46,7 @@ MIN_LEAVING_COSINE = 1e-4
 def reflection_blend(roughness):
     """Weight of the traced mirror reflection vs the environment term: 1 for a mirror,
     falling to 0 at ``ROUGHNESS_LIMIT``."""
-    return np.clip(1.0 - np.asarray(roughness) / ROUGHNESS_LIMIT, 0.0, 1.0) ** 2
+    return shading.unit_clip(1.0 - np.asarray(roughness) / ROUGHNESS_LIMIT) ** 2
 
 
 def leave_surface(directions, geometric_normal, side=1.0):
@@ -77,6 +77,7 @@ class RadianceTracer:
         self.max_bounces = max(int(snapshot.settings.max_bounces), 0)
         self.rays = 0
         self.shadow_rays = 0
+        self.casts = np.array([light.cast_shadows for light in snapshot.lights], bool)
         # Rays and shadow rays per batch label (``radiance(..., batch=)``): what each of several
         # batches traced in one call cost, through every bounce.
         self.batch_rays = np.zeros(0)
@@ -89,13 +90,11 @@ class RadianceTracer:
         self.batch_rays[:len(counts)] += counts
 
     def _albedo(self, material, uv):
-        albedo = self.materials.base_color[material].copy()
-        for index in np.unique(material):
-            texture = self.textures.get(int(index))
-            if texture is None:
-                continue
+        albedo = self.materials.base_color[material]  # a copy (an index array)
+        for index, texture in self.textures.items():  # a few textured materials, each once
             chosen = material == index
-            albedo[chosen] *= rules.sample_texture(texture, uv[chosen])[:, :3]
+            if texture is not None and chosen.any():
+                albedo[chosen] *= rules.sample_texture(texture, uv[chosen])[:, :3]
         return albedo
 
     def direct(self, points_trace, surface: shading.SurfaceSamples, view_distance=None, offset_normal=None,
@@ -104,37 +103,43 @@ class RadianceTracer:
         (default: ``TraceScene.epsilon`` with ``view_distance``) along ``offset_normal`` (the
         geometric normal on the lit side; default: the shading normal).  ``batch``: a label per
         point, its shadow rays counted in ``batch_rays``."""
-        total = np.zeros((len(points_trace), 3))
-        if len(points_trace) == 0:
-            return total
-        origin_world = self.scene.origin
+        n = len(points_trace)
+        lights = self.snapshot.lights
+        if n == 0 or not lights:
+            return np.zeros((n, 3))
         if eps is None:
             eps = self.scene.epsilon(points_trace, view_distance)
         offset_normal = surface.normal if offset_normal is None else offset_normal
-        lights = self.snapshot.lights
-        if not lights:
-            return total
         # Every light at once: one BRDF evaluation and one shadow query over (light, point)
         # pairs, light after light.  Per light, a bounce level of a few rays cost 0.6 ms in
         # numpy and Embree calls (arcade's 5 lights, 7 levels: 70 ms for 349 reflection rays).
-        n = len(points_trace)
-        incidence = [shading.light_incidence(light, points_trace, origin_world) for light in lights]
-        direction = np.concatenate([d for d, _, _ in incidence])
-        distance = np.concatenate([d for _, d, _ in incidence])
-        contribution = shading.brdf_cosine(surface.repeated(len(lights)), direction) \
-            * np.concatenate([e for _, _, e in incidence])
-        casts = np.repeat(np.array([light.cast_shadows for light in lights], bool), n)
-        test = np.flatnonzero(casts & np.any(contribution > 0, axis=1))
+        incidence = [shading.light_incidence(light, points_trace, self.scene.origin) for light in lights]
+        if len(lights) == 1:
+            direction, distance, irradiance = incidence[0]
+        else:
+            direction = np.concatenate([d for d, _, _ in incidence])
+            distance = np.concatenate([d for _, d, _ in incidence])
+            irradiance = np.concatenate([e for _, _, e in incidence])
+        contribution = shading.brdf_cosine(surface.repeated(len(lights)), direction) * irradiance
+        # Lit by some channel (fmax: a NaN channel does not hide the others, as ``any`` would not).
+        lit = np.fmax(np.fmax(contribution[:, 0], contribution[:, 1]), contribution[:, 2]) > 0
+        if not self.casts.all():
+            lit &= np.repeat(self.casts, n)
+        test = np.flatnonzero(lit)
         if len(test):
-            point = test % n
+            point = test % n if len(lights) > 1 else test
             start = points_trace[point] + offset_normal[point] * eps[point, None]
             blocked = self.scene.occluded(start, direction[test], distance[test] - 2 * eps[point])
             self.shadow_rays += len(test)
             if batch is not None:
                 self._count(batch, point)
             contribution[test[blocked]] = 0.0
+        if len(lights) == 1:
+            return contribution
         # Summed light after light, as one light at a time added them.
-        for part in contribution.reshape(len(lights), n, 3):
+        parts = contribution.reshape(len(lights), n, 3)
+        total = parts[0].copy()
+        for part in parts[1:]:
             total += part
         return total
 
@@ -145,40 +150,49 @@ class RadianceTracer:
         label per ray (small ints), every ray its path casts counted in ``batch_rays``;
         ``weight``: the path's throughput so far (``PATH_CUTOFF``)."""
         n = len(origins)
-        depth = np.broadcast_to(np.asarray(depth, dtype=np.float64), (n,))
-        passed = np.broadcast_to(np.asarray(passed, dtype=np.int64), (n,))
-        weight = np.broadcast_to(np.asarray(weight, dtype=np.float64), (n,))
-        result = np.broadcast_to(self.world, (n, 3)).copy()
         if n == 0:
-            return result
-        origins = np.asarray(origins, dtype=np.float64)
-        directions = shading.normalize(np.nan_to_num(np.asarray(directions, dtype=np.float64)))
+            return np.broadcast_to(self.world, (0, 3)).copy()
+        return self._radiance(np.asarray(origins, dtype=np.float64),
+                              np.nan_to_num(np.asarray(directions, dtype=np.float64)),
+                              _per_ray(depth, n, np.float64), _per_ray(passed, n, np.int64),
+                              None if batch is None else _per_ray(batch, n, np.int64), _per_ray(weight, n, np.float64))
+
+    def _radiance(self, origins, directions, depth, passed, batch, weight):
+        """``radiance`` of rays with finite directions and one value per ray of the rest.  A bounce
+        level of a few dozen rays costs its numpy calls, not its rays (0.8 ms a level in 80 calls
+        before, 1-3 rays a level at the end of arcade's glass paths): whole-array steps only,
+        nothing computed for an empty branch."""
+        n = len(origins)
+        result = np.empty((n, 3))
+        result[:] = self.world
+        directions = shading.normalize(directions)
         self.rays += n
         if batch is not None:
-            batch = np.broadcast_to(np.asarray(batch, dtype=np.int64), (n,))
             self._count(batch)
         hits = self.scene.intersect(origins, directions)
-        hit_mask = np.isfinite(hits["t"]) & (hits["geom"] >= 0)
-        if not np.any(hit_mask):
+        hit_mask = (hits["geom"] >= 0) & np.isfinite(hits["t"])
+        if not hit_mask.any():
             return result
         idx, material, _, normal, geometric, uv, set_index = self.scene.hit_surfaces(hits, hit_mask)
         dirs = directions[idx]
-        points = origins[idx] + dirs * hits["t"][idx][:, None]
+        travelled = hits["t"][idx]
+        points = origins[idx] + dirs * travelled[:, None]
         # A degenerate triangle has no geometric normal: use the shading normal, else the ray.
-        no_geometric = np.linalg.norm(geometric, axis=1) < 0.5
-        geometric[no_geometric] = normal[no_geometric]
-        still = np.linalg.norm(geometric, axis=1) < 0.5
-        geometric[still] = -dirs[still]
+        no_geometric = shading.dot(geometric, geometric) < 0.25
+        if no_geometric.any():
+            geometric[no_geometric] = normal[no_geometric]
+            still = shading.dot(geometric, geometric) < 0.25
+            geometric[still] = -dirs[still]
         # Which side: the ray arrives from outside where it opposes the outward normal.
-        entering = np.sum(geometric * dirs, axis=1) < 0
-        facing = np.where(entering[:, None], normal, -normal)
-        geometric_facing = np.where(entering[:, None], geometric, -geometric)
+        entering = shading.dot(geometric, dirs) < 0
+        side = np.where(entering, 1.0, -1.0)[:, None]
+        facing = normal * side
+        geometric_facing = geometric * side
         m = self.materials
         surface = shading.SurfaceSamples(
             position=points, normal=facing, view=-dirs, albedo=self._albedo(material, uv),
             metallic=m.metallic[material], roughness=m.roughness[material],
             transmission=m.transmission[material], ior=m.ior[material], emission=m.emission[material])
-        travelled = hits["t"][idx]
         eps = self.scene.epsilon(points, travelled, set_index=set_index)
         batch = None if batch is None else batch[idx]
         color = surface.emission + self.direct(points, surface, offset_normal=geometric_facing, eps=eps, batch=batch)
@@ -187,7 +201,7 @@ class RadianceTracer:
         transmissive = m.transmissive[material]
         # Dielectric Fresnel for the transmissive part (exact, with total internal reflection).
         eta = np.where(entering, 1.0 / surface.ior, surface.ior)
-        cos_i = np.clip(np.sum(-dirs * facing, axis=1), 0.0, 1.0)
+        cos_i = shading.unit_clip(shading.dot(surface.view, facing))
         fresnel_t = shading.fresnel_dielectric(cos_i, 1.0 / eta)
         reflect_weight = env_fresnel * (1.0 - transmissive)[:, None] + (transmissive * fresnel_t)[:, None]
         blend = reflection_blend(surface.roughness)
@@ -200,23 +214,21 @@ class RadianceTracer:
         # TIR_BOUNCE_COST, so light entering a glass side face can get out again.
         total_internal = transmits & (fresnel_t >= 1.0)
         next_depth = depth + np.where(total_internal, TIR_BOUNCE_COST, 1.0)
-        reflected = np.broadcast_to(self.world, (len(idx), 3)).copy()
-        reflect_path = weight * blend * reflect_weight.max(axis=1)
-        trace_reflection = can_bounce & (blend > 0) & (reflect_weight.max(axis=1) > 0.02) \
-            & (reflect_path >= PATH_CUTOFF)
+        reflect_largest = shading.largest(reflect_weight)
+        reflect_path = weight * blend * reflect_largest
+        trace_reflection = can_bounce & (blend > 0) & (reflect_largest > 0.02) & (reflect_path >= PATH_CUTOFF)
         refracts = transmits & ~total_internal
         tint = np.where(entering[:, None], surface.albedo, 1.0)
         refract_weight = (transmissive * (1.0 - fresnel_t))[:, None] * tint
-        refract_path = weight * refract_weight.max(axis=1)
+        refract_path = weight * shading.largest(refract_weight)
         trace_refraction = can_bounce & refracts & (refract_path >= PATH_CUTOFF)
         world_through = np.flatnonzero(can_bounce & refracts & ~trace_refraction)  # too faint: the world colour
         # Straight on, unbent: the 1 - alpha part of the surface, and the transmitted part of a
         # transmissive surface out of bounces (the raster's blended transparency).
         alpha = m.alpha[material][:, None]
-        straight_weight = (1.0 - alpha) + alpha * np.where(
-            (refracts & ~can_bounce)[:, None], (transmissive * (1.0 - fresnel_t))[:, None] * tint, 0.0)
-        straight = np.flatnonzero(straight_weight.max(axis=1) > 0)
-        straight_path = weight[straight] * straight_weight[straight].max(axis=1)
+        straight_weight = (1.0 - alpha) + alpha * np.where((refracts & ~can_bounce)[:, None], refract_weight, 0.0)
+        straight = np.flatnonzero(shading.largest(straight_weight) > 0)
+        straight_path = weight[straight] * shading.largest(straight_weight[straight])
         more = (passed[straight] < MAX_PASS_THROUGH) & (straight_path >= PATH_CUTOFF)
 
         # Every secondary ray of this batch (reflected, refracted, passing straight on) is traced
@@ -224,28 +236,46 @@ class RadianceTracer:
         r = np.flatnonzero(trace_reflection)
         t = np.flatnonzero(trace_refraction)
         s = straight[more]
-        reflect_direction = leave_surface(shading.reflect(dirs[r], facing[r]), geometric_facing[r])
-        refract_direction, _ = shading.refract(dirs[t], facing[t], eta[t])
-        refract_direction = leave_surface(refract_direction, geometric_facing[t], side=-1.0)
-        secondary = self.radiance(
-            np.concatenate([points[r] + geometric_facing[r] * eps[r, None],
-                            points[t] - geometric_facing[t] * eps[t, None],
-                            points[s] - geometric_facing[s] * eps[s, None]]),
-            np.concatenate([reflect_direction, refract_direction, dirs[s]]),
-            np.concatenate([next_depth[r], next_depth[t], depth[s]]),
-            np.concatenate([passed[r], passed[t], passed[s] + 1]),
-            None if batch is None else np.concatenate([batch[r], batch[t], batch[s]]),
-            np.concatenate([reflect_path[r], refract_path[t], straight_path[more]]))
-        traced, through, passing = np.split(secondary, [len(r), len(r) + len(t)])
-
-        reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
-        color += reflect_weight * reflected
-        color[t] += refract_weight[t] * through
-        color[world_through] += refract_weight[world_through] * self.world
+        traced = through = passing = np.zeros((0, 3))
+        if len(r) + len(t) + len(s):
+            reflect_direction = leave_surface(shading.reflect(dirs[r], facing[r]), geometric_facing[r]) \
+                if len(r) else dirs[r]
+            refract_direction = leave_surface(shading.refract(dirs[t], facing[t], eta[t])[0], geometric_facing[t],
+                                              side=-1.0) if len(t) else dirs[t]
+            # Reflections leave on the lit side, the rest on the other.
+            order = np.concatenate([r, t, s])
+            away = eps[order]
+            away[len(r):] *= -1.0
+            secondary = self._radiance(
+                points[order] + geometric_facing[order] * away[:, None],
+                np.concatenate([reflect_direction, refract_direction, dirs[s]]),
+                np.concatenate([next_depth[r], next_depth[t], depth[s]]),
+                np.concatenate([passed[r], passed[t], passed[s] + 1]),
+                None if batch is None else batch[order],
+                np.concatenate([reflect_path[r], refract_path[t], straight_path[more]]))
+            traced, through, passing = secondary[:len(r)], secondary[len(r):len(r) + len(t)], secondary[len(r) + len(t):]
+        if len(r):
+            reflected = np.empty((len(idx), 3))
+            reflected[:] = self.world
+            reflected[r] = blend[r, None] * traced + (1.0 - blend[r, None]) * self.world
+            color += reflect_weight * reflected
+        else:
+            color += reflect_weight * self.world
+        if len(t):
+            color[t] += refract_weight[t] * through
+        if len(world_through):
+            color[world_through] += refract_weight[world_through] * self.world
         color *= alpha
         if len(straight):
-            behind = np.broadcast_to(self.world, (len(straight), 3)).copy()
+            behind = np.empty((len(straight), 3))
+            behind[:] = self.world
             behind[more] = passing
             color[straight] += straight_weight[straight] * behind
         result[idx] = shading.finite(color)
         return result
+
+
+def _per_ray(value, n, dtype):
+    """``value`` (a number or one per ray) as one per ray of ``dtype``."""
+    value = np.asarray(value, dtype=dtype)
+    return value if value.shape == (n,) else np.broadcast_to(value, (n,))

