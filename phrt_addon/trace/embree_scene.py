@@ -172,6 +172,7 @@ class TraceScene:
         self._static = []
         self._dynamic = []
         self._element_set = np.full(1, -1, np.int64)  # element + 1 -> index into sets() (its cluster's frame)
+        self._frames = None  # (sets, their offsets, their extents) of the last ``epsilon`` (``_set_frames``)
         self.stats = {"upload_ms": 0.0, "static_builds": 0, "static_triangles": 0, "dynamic_triangles": 0,
                       "clusters": 0, "embree_ms": 0.0}
 
@@ -180,6 +181,7 @@ class TraceScene:
             self._pool.shutdown(wait=False)
             self._pool = None
         self._static, self._dynamic = [], []
+        self._frames = None
 
     def sets(self):
         return self._static + self._dynamic
@@ -196,6 +198,7 @@ class TraceScene:
         """Bring the Embree scenes in line with the snapshot; returns upload ms of this frame.
         ``casts_shadow``: per material (default: ``rules.casts_shadow`` of each)."""
         start = time.perf_counter()
+        self._frames = None  # the sets are made again below: the old ones are not kept alive
         if casts_shadow is None:
             casts_shadow = np.array([rules.casts_shadow(m) for m in snapshot.materials], bool)
         casts_shadow = np.asarray(casts_shadow, bool)
@@ -296,11 +299,11 @@ class TraceScene:
 
     def _set_frames(self, sets):
         """The sets' offsets (k, 3) and extents (k,) as arrays, made again when the sets change."""
-        kept = getattr(self, "_frames_of", ())  # the sets themselves: their ids cannot be reused
-        if len(kept) != len(sets) or any(a is not b for a, b in zip(kept, sets)):
-            self._frames_of = tuple(sets)
-            self._frames = (np.array([s.offset for s in sets]), np.array([s.extent for s in sets]))
-        return self._frames
+        kept = self._frames  # (the sets themselves: their ids cannot be reused, offsets, extents)
+        if kept is None or len(kept[0]) != len(sets) or any(a is not b for a, b in zip(kept[0], sets)):
+            kept = self._frames = (tuple(sets), np.array([s.offset for s in sets]),
+                                   np.array([s.extent for s in sets]))
+        return kept[1], kept[2]
 
     # -- queries ------------------------------------------------------------
     def _run(self, scene, origins, directions, **kwargs):

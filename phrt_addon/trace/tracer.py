@@ -77,7 +77,6 @@ class RadianceTracer:
         self.max_bounces = max(int(snapshot.settings.max_bounces), 0)
         self.rays = 0
         self.shadow_rays = 0
-        self.casts = np.array([light.cast_shadows for light in snapshot.lights], bool)
         # Rays and shadow rays per batch label (``radiance(..., batch=)``): what each of several
         # batches traced in one call cost, through every bounce.
         self.batch_rays = np.zeros(0)
@@ -123,8 +122,9 @@ class RadianceTracer:
         contribution = shading.brdf_cosine(surface.repeated(len(lights)), direction) * irradiance
         # Lit by some channel (fmax: a NaN channel does not hide the others, as ``any`` would not).
         lit = np.fmax(np.fmax(contribution[:, 0], contribution[:, 1]), contribution[:, 2]) > 0
-        if not self.casts.all():
-            lit &= np.repeat(self.casts, n)
+        casts = [bool(light.cast_shadows) for light in lights]
+        if not all(casts):
+            lit &= np.repeat(np.array(casts, bool), n)
         test = np.flatnonzero(lit)
         if len(test):
             point = test % n if len(lights) > 1 else test

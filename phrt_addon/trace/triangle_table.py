@@ -33,6 +33,9 @@ def hit_surfaces(hits, mask):
     axes of 3 and per-set copies)."""
     indices = np.flatnonzero(mask)
     sets = hits["sets"]
+    if len(indices) == 0:
+        none = np.zeros(0, np.int64)
+        return indices, none, none.copy(), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)), none.copy()
     set_index = hits["set"][indices]
     geom_index = hits["geom"][indices]
     prim = hits["prim"][indices]

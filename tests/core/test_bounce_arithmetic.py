@@ -33,6 +33,35 @@ def test_unit_clip_largest_and_finite_match_the_numpy_they_replace(dtype):
 def test_pow5_is_the_fifth_power():
     x = np.r_[np.linspace(0.0, 1.0, 1001), 1e-80, 3.0]
     np.testing.assert_allclose(shading.pow5(x), x ** 5, rtol=1e-15, atol=0)
+    single = np.linspace(0.0, 1.0, 1001, dtype=np.float32)
+    assert shading.pow5(single).dtype == np.float32
+    np.testing.assert_allclose(shading.pow5(single), single.astype(np.float64) ** 5, rtol=5e-7, atol=1e-30)
+
+
+def test_specular_f0_is_float64_for_a_float32_gbuffer():
+    """The reference raster passes float32 samples: F0 (and what is made from it) stays float64,
+    the float32 dielectric term widened as before."""
+    rng = np.random.default_rng(2)
+    albedo, metallic = rng.random((50, 3)).astype(np.float32), rng.random(50).astype(np.float32)
+    ior = rng.uniform(1.0, 2.5, 50).astype(np.float32)
+    f0 = shading.specular_f0(albedo, metallic, ior)
+    dielectric = shading.f0_dielectric(ior)[:, None] * np.ones((1, 3))
+    assert f0.dtype == np.float64
+    np.testing.assert_array_equal(f0, dielectric + (albedo - dielectric) * metallic[:, None])
+    assert shading.specular_f90(f0).shape == (50, 1)
+
+
+def test_hit_attributes_of_no_hits_without_any_set():
+    """A scene with nothing to trace: misses only, empty attributes (no set to look up)."""
+    scene = embree_scene.TraceScene(threads=1)
+    try:
+        scene.origin = np.zeros(3)
+        hits = scene.intersect(np.zeros((3, 3)), np.tile([0.0, 0.0, 1.0], (3, 1)))
+        index, material, element, normal, geometric, uv, set_index = scene.hit_surfaces(hits, np.isfinite(hits["t"]))
+        assert len(index) == len(material) == len(element) == len(set_index) == 0
+        assert normal.shape == geometric.shape == (0, 3) and uv.shape == (0, 2)
+    finally:
+        scene.close()
 
 
 def _scene_of_several_sets(closing):
@@ -104,8 +133,9 @@ def _alpha_card_scene(closing, lights=(), floor=True):
 
 
 def test_a_surface_passed_straight_through_too_often_shows_the_world_behind_it(closing):
-    """A path out of pass-throughs traces nothing further (no secondary call at all): behind the
-    card is the world colour, as if there were no floor; with passes left, the floor shows."""
+    """A path out of pass-throughs traces nothing further (and nothing else of its level needs a
+    secondary ray): behind the card is the world colour, as if there were no floor; with passes
+    left, the floor shows."""
     scene, radiance_tracer = _alpha_card_scene(closing)
     alone_scene, alone = _alpha_card_scene(closing, floor=False)
     down = np.array([[0.0, 0.0, -1.0]])
@@ -118,20 +148,30 @@ def test_a_surface_passed_straight_through_too_often_shows_the_world_behind_it(c
     assert np.all(fresh[0, 1:] < worn[0, 1:] - 0.1)  # the red floor through the card, not the grey world
 
 
-def test_every_branch_of_a_level_together_stays_finite_and_counts_its_rays(closing):
-    """One batch whose hits reflect (mirror), refract (glass, also with total internal reflection),
-    pass straight on (an alpha card) and stop (matte), under a light that casts no shadow and one
-    that does: finite values, each ray counted once per level it reaches."""
+def _branches_scene(closing, shadowless_fill=True):
     card = Material("card", base_color=(0.2, 0.6, 0.2), roughness=1.0, alpha=0.5)
     materials = [diffuse("grey"), GLASS, MIRROR, card]
     meshes = [quad("floor", (0, 0, 0), 20, 20, "+z", material=0),
               box("glass", (-3, -1, 0.5), (-1, 1, 2.5), material=1),
               quad("mirror", (2, 0, 1.5), 2, 2, "-x", material=2),
               quad("card", (0, 3, 1), 2, 2, "+z", material=3)]
-    lights = [Light("lamp", "POINT", (50.0, 50.0, 50.0), position=(0.0, 0.0, 5.0)),
-              Light("fill", "POINT", (20.0, 20.0, 20.0), position=(0.0, -4.0, 4.0), cast_shadows=False)]
+    lights = [Light("lamp", "POINT", (50.0, 50.0, 50.0), position=(0.0, 0.0, 5.0))]
+    if shadowless_fill:
+        lights.append(Light("fill", "POINT", (20.0, 20.0, 20.0), position=(0.0, -4.0, 4.0), cast_shadows=False))
     scene, radiance_tracer = build(snapshot(meshes, materials, lights, world=(0.1, 0.1, 0.1)))
     closing(scene)
+    return scene, radiance_tracer
+
+
+def test_every_branch_of_a_level_together_stays_finite_and_counts_its_rays(closing, monkeypatch):
+    """One batch whose hits reflect (mirror), refract (glass, also with total internal reflection),
+    pass straight on (an alpha card) and stop (matte), under a light that casts no shadow and one
+    that does: finite values; each label's rays (all levels, shadow rays too) what its rays alone
+    cost; the shadowless light adds no shadow ray."""
+    scene, radiance_tracer = _branches_scene(closing)
+    levels = []
+    intersect = TraceScene.intersect
+    monkeypatch.setattr(TraceScene, "intersect", lambda self, o, d: levels.append(len(o)) or intersect(self, o, d))
     rng = np.random.default_rng(5)
     eye = scene.to_trace(np.tile([0.0, 0.0, 8.0], (600, 1)))
     target = scene.to_trace(np.c_[rng.uniform(-4, 4, 600), rng.uniform(-4, 4, 600), np.zeros(600)])
@@ -139,11 +179,16 @@ def test_every_branch_of_a_level_together_stays_finite_and_counts_its_rays(closi
     radiance_tracer.batch_rays = np.zeros(3)
     color = radiance_tracer.radiance(eye, target - eye, 0, batch=batch)
     assert np.all(np.isfinite(color)) and np.all(color >= 0)
-    assert radiance_tracer.rays > 600  # secondary levels were traced
-    assert radiance_tracer.batch_rays.sum() == radiance_tracer.rays + radiance_tracer.shadow_rays
-    assert radiance_tracer.shadow_rays > 0
-    # The light that casts no shadow is never tested: one shadow ray per lit hit at most.
-    assert radiance_tracer.shadow_rays <= radiance_tracer.rays
+    assert len(levels) >= 4 and levels[0] == 600  # glass paths go several levels deep
+    for label in range(3):
+        _, alone = _branches_scene(closing)
+        chosen = batch == label
+        np.testing.assert_allclose(alone.radiance(eye[chosen], (target - eye)[chosen], 0), color[chosen], rtol=1e-12)
+        assert radiance_tracer.batch_rays[label] == alone.rays + alone.shadow_rays
+    _, lamp_only = _branches_scene(closing, shadowless_fill=False)
+    lamp_only.radiance(eye, target - eye, 0)
+    assert radiance_tracer.shadow_rays == lamp_only.shadow_rays > 0
+    assert radiance_tracer.rays == lamp_only.rays
 
 
 def test_leave_surface_keeps_directions_that_already_leave():
