@@ -130,8 +130,9 @@ def other_paths_plan(frames, resolution):
             ids = {mode: plan.run_id(scene_name, path, mode) for mode in ("RASTER", "RAYTRACE", "HYBRID")}
             jobs.append(plan.Job(ids["RASTER"], "run", "RASTER", scene=scene_name, path=path))
             jobs.append(plan.Job(ids["RAYTRACE"], "run", "RAYTRACE", scene=scene_name, path=path))
+            # The paper's heuristic, whatever the sample scene's own selection (generate.SELECTION).
             jobs.append(plan.Job(ids["HYBRID"], "run", "HYBRID", scene=scene_name, path=path,
-                                 depends_on=[ids["RASTER"], ids["RAYTRACE"]]))
+                                 depends_on=[ids["RASTER"], ids["RAYTRACE"]], overrides=dict(plan.BASELINE)))
     return plan.Plan(scene=SCENES[0], scene_label=SCENES[0], path=PATHS[0], frames=list(frames),
                      resolution=list(resolution), budgets=[], oracle_every=0, jobs=jobs)
 

@@ -143,4 +143,5 @@ def test_the_papers_other_paths_are_one_plan_of_runs_named_as_phrt_render_names_
         assert path != paper.SWEPT_PATH and job.id == f"{label}-{path}-{job.mode.lower()}"
         if job.mode == "HYBRID":  # at the scene's own budget, resolved from its raster and raytrace runs
             assert job.budget_at is None and job.depends_on == [f"{label}-{path}-raster", f"{label}-{path}-raytrace"]
+            assert job.overrides["selection"] == "PAPER"  # the paper's heuristic, not the sample scenes' BENEFIT
     assert [job.id for job in others.in_dependency_order()] == ids

@@ -127,6 +127,7 @@ def take_snapshot(name: str) -> Snapshot:
         "resolution": (scene.render.resolution_x, scene.render.resolution_y,
                        scene.render.resolution_percentage),
         "budget_at": scene.phrt.budget_at if scene.phrt.use_budget_at else None, "camera": scene.camera.name, "engine": scene.render.engine,
+        "selection": scene.phrt.selection,
         "phrt_paths": scene.get("phrt_paths"), "over_area": scene.get("phrt_over_area"),
         "over_area_element": scene.get("phrt_over_area_element"),
         "path_names": generate.path_names(scene),
@@ -202,6 +203,7 @@ def test_scene_defaults(snap):
     # A budget between the modes, resolved on the machine that renders: no millisecond figure.
     assert settings["budget_at"] == pytest.approx(generate.BUDGET_AT) and 0 < settings["budget_at"] < 1
     assert settings["camera"] == "path1"
+    assert settings["selection"] == generate.SELECTION == "BENEFIT"  # the better of the two on the judged paths
     assert settings["engine"] in ("PHRT", "CYCLES")
     assert settings["phrt_paths"] == "path1,path2,path3"
     assert settings["path_names"] == ["path1", "path2", "path3"]
