@@ -54,7 +54,7 @@ SEEDS = {"arcade": 1201, "atrium": 1202}
 BUDGET_AT = 0.4
 # The selection the sample scenes render with: BENEFIT, which beat the paper's heuristic on the
 # held-out paths at 19 of 24 path x budget points of two evaluations on 6 Dec 2026 (2 losses where
-# the oracle removes at most 2.4% of the frame's error; docs/selection.md).  ``make paper`` and
+# the oracle removes at most 1.2% of the frame's error; docs/selection.md).  ``make paper`` and
 # the sweeps' ``measured`` variant still ask for PAPER, the paper's heuristic.
 SELECTION = "BENEFIT"
 RESOLUTION = (640, 480)
