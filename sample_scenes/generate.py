@@ -53,9 +53,9 @@ SCENES = ("arcade", "atrium")
 SEEDS = {"arcade": 1201, "atrium": 1202}
 BUDGET_AT = 0.4
 # The selection the sample scenes render with: BENEFIT, which beat the paper's heuristic on the
-# held-out paths at 19 of 24 path x budget points of two evaluations on 6 Dec 2026 (2 losses where
-# the oracle removes at most 1.2% of the frame's error; docs/selection.md).  ``make paper`` and
-# the sweeps' ``measured`` variant still ask for PAPER, the paper's heuristic.
+# held-out paths at 27 of 36 path x budget points of three evaluations on 6 Dec 2026 (2 losses,
+# where the oracle removes at most 1.2% of the frame's error; docs/selection.md).  ``make paper``
+# and the sweeps' ``measured`` variant still ask for PAPER, the paper's heuristic.
 SELECTION = "BENEFIT"
 RESOLUTION = (640, 480)
 LENS_MM = 20.0     # 84 degrees horizontal field of view: a first-person game's
