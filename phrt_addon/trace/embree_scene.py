@@ -58,10 +58,9 @@ def ray_epsilon(points: np.ndarray, scene_extent, view_distance=None) -> np.ndar
     error of that size, which in a telephoto view of a small scene is far above the
     point's own magnitude (shadow acne without it)."""
     points = np.abs(points)
-    # The largest coordinate; of (n, 3) points component by component (numpy's reduction over
-    # an axis of 3 is several times slower); NaN stays NaN either way.
-    magnitude = np.maximum(np.maximum(points[..., 0], points[..., 1]), points[..., 2]) \
-        if points.shape[-1] == 3 else np.max(points, axis=-1)
+    # The largest coordinate (of (n, 3) points component by component: ``shading.largest``); NaN
+    # stays NaN either way.
+    magnitude = shading.largest(points) if points.shape[-1] == 3 else np.max(points, axis=-1)
     if view_distance is not None:
         magnitude = np.maximum(magnitude, np.nan_to_num(np.asarray(view_distance, np.float64), posinf=0.0))
     extent = np.asarray(scene_extent, dtype=np.float64)
