@@ -58,7 +58,7 @@ judged paths are arcade path3, atrium path2-3 and the showcase (docs/DESIGN.md).
 """
 from __future__ import annotations
 
-from itertools import repeat
+from itertools import compress, repeat
 
 import numpy as np
 
@@ -224,10 +224,11 @@ class BenefitSelector:
             if tiers:
                 return self._choose_rates(names, allowed, value, bonus, was, tier_costs, room, fixed_due,
                                           add_factor)
-            flat = knapsack.solve_grouped(np.where(allowed, switched + bonus, 0.0).ravel(),
-                                          np.where(allowed, charged, np.inf).ravel(),
-                                          np.tile(np.arange(len(EFFECTS)), len(eligible)), fixed_due, room)
-            return np.where(flat.reshape(eligible.shape) & allowed, 1.0, 0.0)
+            items = np.flatnonzero(allowed.ravel())  # only those allowed: no infinite cost to clean
+            flat = np.zeros(allowed.size)
+            flat[items[knapsack.solve_grouped((switched + bonus).ravel()[items], charged.ravel()[items],
+                                              items % len(EFFECTS), fixed_due, room)]] = 1.0
+            return flat.reshape(allowed.shape)
 
         rate = fill(may_add, np.zeros(eligible.shape), capacity, charged_fixed)
         # Exploration competes only for the time the items kept from last frame leave: a never
@@ -243,8 +244,7 @@ class BenefitSelector:
         if np.any(explore):
             bonus = np.zeros(eligible.shape)
             total = float(switched[eligible].sum()) + 1e-12
-            waited = np.fromiter(map(self.waited.get, [keys[k] for k in np.flatnonzero(explore).tolist()],
-                                     repeat(0)), np.float64)
+            waited = np.fromiter(map(self.waited.get, compress(keys, explore.ravel().tolist()), repeat(0)), np.float64)
             bonus[explore] = total * np.minimum((waited + 1) / EXPLORE_FRAMES, 1.0)
             added = fill(may_add & ~kept, bonus, room, np.where(paid, 0.0, charged_fixed))
             rate = np.where(kept, rate, added)

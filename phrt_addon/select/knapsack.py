@@ -56,8 +56,11 @@ def _number(value, nan: float) -> float:
 def _in_bins(ms, capacity, n_bins) -> np.ndarray:
     """Costs (ms) in whole bins of ``capacity``, rounded up (less a relative 1e-9 that float
     division adds to whole bins); at most n_bins + 1 (does not fit), NaN as that too."""
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        scaled = np.minimum(np.asarray(ms, np.float64) / capacity * n_bins, n_bins + 1.0)
+    if capacity > 0 and capacity <= LARGE:  # at most 2 x n_bins before the cap: no overflow, no errstate
+        scaled = np.minimum(np.minimum(np.asarray(ms, np.float64), 2.0 * capacity) / capacity * n_bins, n_bins + 1.0)
+    else:
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            scaled = np.minimum(np.asarray(ms, np.float64) / capacity * n_bins, n_bins + 1.0)
     if not np.isfinite(scaled).all():
         scaled = np.nan_to_num(scaled, nan=n_bins + 1.0)
     return np.ceil(scaled * (1.0 - 1e-9)).astype(np.int64)
@@ -179,19 +182,27 @@ def _choices_programme(values, weights, usable, groups, group_weights, capacity_
     best = np.zeros(size)
     shifted = np.empty(size)
     row_weights, row_values = np.asarray(weights).tolist(), np.asarray(values).tolist()
-    row_options = [[option for option, fits in enumerate(flags) if fits]
-                   for flags in (np.asarray(usable, bool) & (np.asarray(weights) <= capacity_bins)).tolist()]
+    fits = np.asarray(usable, bool) & (np.asarray(weights) <= capacity_bins)
+    if n_options == 1:  # the 0/1 programme: one shared list per answer
+        only, none = [0], []
+        row_options = [only if flag else none for flag in fits[:, 0].tolist()]
+    else:
+        row_options = [[option for option, flag in enumerate(flags) if flag] for flags in fits.tolist()]
+    groups = np.asarray(groups)
     trail = []  # per group with items: (its items, its table, opened-at mask, its fixed bins)
     for group in np.unique(groups).tolist():
         fixed = int(group_weights[group])
-        if fixed > capacity_bins:
+        # A row without a usable option changes nothing (nor does a group without one: best is
+        # non-decreasing in the bins, and the group's weight only shifts it right).
+        members = np.flatnonzero((groups == group) & fits.any(axis=1)).tolist()
+        if fixed > capacity_bins or not members:
             continue
-        members = np.flatnonzero(groups == group).tolist()
         table = np.empty((len(members) + 1, size))
         table[0, :fixed] = -np.inf
         table[0, fixed:] = best[:size - fixed]
+        rows = list(table)  # the rows' views, made at once
         for position, member in enumerate(members):
-            before, row = table[position], table[position + 1]
+            before, row = rows[position], rows[position + 1]
             row[:] = before
             for option in row_options[member]:
                 weight = row_weights[member][option]
@@ -206,28 +217,32 @@ def _choices_programme(values, weights, usable, groups, group_weights, capacity_
     for members, table, use, fixed in reversed(trail):
         if not use[remaining]:
             continue
+        column = table[:, remaining].tolist()  # the values at the bins left (again after each take)
         for position in range(len(members) - 1, -1, -1):
-            member, now = members[position], float(table[position + 1, remaining])
-            if not now > float(table[position, remaining]):
+            now = column[position + 1]
+            if not now > column[position]:
                 continue
+            member = members[position]
             for option in row_options[member]:
                 weight = row_weights[member][option]
                 if weight <= remaining and float(table[position, remaining - weight]) + row_values[member][option] == now:
                     choice[member] = option
                     remaining -= weight
+                    column = table[:position + 1, remaining].tolist()
                     break
         remaining -= fixed
     return choice
 
 
 def _programme(values, weights, usable, groups, group_weights, capacity_bins) -> np.ndarray:
-    """:func:`_choices_programme`, from ``REDUCE_FROM`` rows after :func:`knapsack_bounds.reduce`:
-    the rows every optimum fixes, then the programme over the free rows within the bins the fixed
+    """:func:`_choices_programme`, from ``REDUCE_FROM`` rows after :func:`knapsack_bounds.reduce`
+    (when it looks :func:`~knapsack_bounds.promising`): the rows every optimum fixes, then the programme over the free rows within the bins the fixed
     ones leave (their groups paid).  The same choice as the programme over every row."""
-    if len(values) >= REDUCE_FROM:
+    masked = np.where(usable, values, -np.inf) if len(values) >= REDUCE_FROM else None
+    ratio = None if masked is None else knapsack_bounds.promising(masked, weights, capacity_bins)
+    if ratio is not None:
         group_array = np.asarray(group_weights, np.float64)
-        fixed = knapsack_bounds.reduce(np.where(usable, values, -np.inf), weights, groups, group_array,
-                                       capacity_bins)
+        fixed = knapsack_bounds.reduce(masked, weights, groups, group_array, capacity_bins, ratio)
         free = fixed == knapsack_bounds.FREE
         forced = np.flatnonzero(fixed >= 0)
         opened = np.unique(groups[forced])

@@ -51,6 +51,10 @@ def test_the_bound_holds_and_fixing_keeps_an_optimum(instance):
     assert spent <= capacity and abs(sum(values[i, o] for i, o in picked) - lower) < 1e-9 and lower <= best + 1e-9
     fixed = knapsack_bounds.reduce(values, weights, groups, group_weights, capacity)
     assert abs(optimum(values, weights, groups, group_weights, capacity, fixed) - best) < 1e-9
+    # The break ratio the pre-test found, handed on to the reduction: still exact.
+    ratio = knapsack_bounds.promising(values, weights, capacity, share=0.0)
+    fixed = knapsack_bounds.reduce(values, weights, groups, group_weights, capacity, ratio)
+    assert abs(optimum(values, weights, groups, group_weights, capacity, fixed) - best) < 1e-9
 
 
 def frame_like(rng, n, options):
@@ -86,3 +90,47 @@ def test_the_bound_fixes_most_items_of_a_frame_like_instance():
     weights = np.ceil(costs / capacity * n_bins)
     fixed = knapsack_bounds.reduce(values, weights, groups, np.ceil(group_costs / capacity * n_bins), n_bins)
     assert np.mean(fixed == knapsack_bounds.FREE) < 0.4
+
+
+def exploring(rng, n):
+    """An exploring frame's second knapsack: every item worth about the whole frame's value (the
+    exploration's bonus) give or take a few percent, costs spread."""
+    values = 15000.0 + rng.random(n) * 900.0
+    costs = rng.random(n) * 5.0 + 0.05
+    return values[:, None], costs[:, None], rng.integers(0, 3, n), np.array([0.0, 0.0, 0.0]), float(costs.sum() / 3)
+
+
+def test_the_pre_test_skips_the_reduction_only_where_it_would_fix_little():
+    """``promising``: yes on frame-like instances (the reduction fixes most of their items), no on
+    an exploring frame's, where the bound's gap is one item wide and the reduction fixes none."""
+    rng = np.random.default_rng(5)
+    for options in (1, 2, 3):
+        values, costs, groups, group_costs, capacity = frame_like(rng, 150, options)
+        n_bins = knapsack.bins_for(150 + 3)
+        assert knapsack_bounds.promising(values, np.ceil(costs / capacity * n_bins), n_bins) is not None
+    values, costs, groups, group_costs, capacity = exploring(rng, 90)
+    n_bins = knapsack.bins_for(90 + 3)
+    weights = np.ceil(costs / capacity * n_bins)
+    assert knapsack_bounds.promising(values, weights, n_bins) is None
+    fixed = knapsack_bounds.reduce(values, weights, groups, group_costs, n_bins)
+    assert np.mean(fixed == knapsack_bounds.FREE) > 0.75  # what the skip saves: a reduction that fixes little
+
+
+def test_skipping_the_reduction_changes_no_choice(monkeypatch):
+    """The pre-test only decides how the optimum is found: forced to run the reduction everywhere,
+    or to skip it everywhere, the programme returns the same choices (exploring and frame-like)."""
+    rng = np.random.default_rng(9)
+    instances = [exploring(rng, int(rng.integers(knapsack.REDUCE_FROM, 200))) for _ in range(10)] + \
+        [frame_like(rng, int(rng.integers(knapsack.REDUCE_FROM, 200)), int(rng.integers(1, 4))) for _ in range(10)]
+
+    def solved(v, c, g, gc, cap):
+        return (knapsack.solve_grouped(v[:, 0], c[:, 0], g, gc, cap),
+                knapsack.solve_choices(v, c, cap, groups=g, group_costs=gc))
+
+    found = [solved(*instance) for instance in instances]
+    real = knapsack_bounds.promising
+    for forced in (lambda *a, **k: None, lambda *a, **k: real(*a, share=0.0)):
+        monkeypatch.setattr(knapsack_bounds, "promising", forced)
+        for instance, before in zip(instances, found):
+            for now, then in zip(solved(*instance), before):
+                assert np.array_equal(now, then)
