@@ -64,6 +64,20 @@ def percentile(values, q: float) -> float:
     return ordered[low] + (ordered[high] - ordered[low]) * (rank - low)
 
 
+def median(values) -> float:
+    """``np.median`` of a non-empty float array (NaN if any is NaN), by one partition: np.median's
+    own checks cost 10-20 µs a call, and the cost fit takes five a traced frame per effect."""
+    values = np.asarray(values, np.float64).ravel()
+    n = len(values)
+    middle = n // 2
+    if n % 2:
+        value = float(np.partition(values, middle)[middle])
+    else:
+        low, high = np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].tolist()
+        value = (low + high) / 2.0  # np.median's mean of the two
+    return value if not np.isnan(values).any() else float("nan")
+
+
 class FrameTime:
     """The frame-to-frame state of the time the selection may fill."""
 

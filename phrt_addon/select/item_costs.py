@@ -38,13 +38,16 @@ Q (``rt_cost``) scales an item's cost; it never adds a hidden margin.  Plain num
 """
 from __future__ import annotations
 
+import math
 from collections import deque
+from functools import lru_cache
 
 import numpy as np
 
 from ..finite import finite
 from ..schema import EFFECTS
 from .benefit_selection import TIER_COST, TIER_RATES
+from .frame_time import median
 from .cost_model import MS_PER_RAY_PRIOR, STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES, UNMEASURED_MARGIN
 
 WINDOW = 32
@@ -178,9 +181,11 @@ class ItemCosts:
         expected = np.asarray(expected_rays, np.float64) * np.where(np.asarray(rates) > 0, rates, 1.0)
         item_rays = finite(item_rays, nan=0.0, posinf=0.0, neginf=0.0)
         chosen = np.asarray(chosen, bool)
-        for i, j in zip(*np.nonzero(chosen & (expected > 0) & (item_rays > 0))):
+        low, high = RATIO_RANGE
+        found = np.nonzero(chosen & (expected > 0) & (item_rays > 0))
+        for i, j, ratio in zip(*(index.tolist() for index in found), (item_rays[found] / expected[found]).tolist()):
             key = (names[i], EFFECTS[j])
-            value = float(np.clip(item_rays[i, j] / expected[i, j], *RATIO_RANGE))
+            value = min(max(ratio, low), high)
             old = self.ratio.get(key)
             self.ratio[key] = value if old is None else old + RATIO_SMOOTHING * (value - old)
         for j, effect in enumerate(EFFECTS):
@@ -202,7 +207,7 @@ class ItemCosts:
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
-                self._pooled[j] = float(np.median(measured))
+                self._pooled[j] = median(measured)
 
     def _window(self, effect) -> list:
         """The samples an effect's costs are fitted on: its last WINDOW traced frames and the
@@ -213,7 +218,15 @@ class ItemCosts:
 
 
 def _octave(rays_per_item: float) -> int:
-    return int(np.floor(np.log(max(rays_per_item, 1.0)) / np.log(ANCHOR_BASE)))
+    return math.floor(math.log(max(rays_per_item, 1.0)) / math.log(ANCHOR_BASE))
+
+
+@lru_cache(maxsize=8)
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (i, j) index pairs i < j of a window of n samples (read-only, kept per n)."""
+    i, j = np.triu_indices(n, 1)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
 
 
 def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]:
@@ -227,7 +240,7 @@ def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]
     setup = setup if timed_setup else np.zeros_like(setup)
     rest = np.maximum(ms - setup, 0.0)
     items = np.maximum(items, 1.0)
-    i, j = np.triu_indices(len(data), 1)
+    i, j = _pairs(len(data))
     # Embree's own ms a ray: the slope of its time against the rays over pairs of frames SPREAD
     # apart (its per-call overhead is no ray's: 160 rays of one small caster took 0.8 us a ray
     # inside Embree, 1,000 rays 0.4, a 36,000-ray batch 0.19), else on the window's largest batch.
@@ -235,25 +248,26 @@ def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]
     largest = int(np.argmax(rays))
     embree = float(inside[largest] / rays[largest])
     if np.any(apart):
-        slope = float(np.median((inside[j] - inside[i])[apart] / (rays[j] - rays[i])[apart]))
-        embree = float(np.clip(slope, 0.0, embree)) if slope > 0 else embree
+        first, second = i[apart], j[apart]
+        slope = median((inside[second] - inside[first]) / (rays[second] - rays[first]))
+        embree = min(slope, embree) if slope > 0 else embree
     # An item's time against its rays, per item of each frame (a frame of two casters is two
     # items of half its rays each): a power law through the pairs of frames SPREAD apart.
     x, y = rays / items, rest / items
     usable = (x > 0) & (y > 0)
     apart = (np.maximum(x[i], x[j]) >= SPREAD * np.minimum(x[i], x[j])) & usable[i] & usable[j]
     if np.count_nonzero(apart) >= MIN_PAIRS:
-        exponent = float(np.clip(np.median(np.log(y[j] / y[i])[apart] / np.log(x[j] / x[i])[apart]),
-                                 MIN_EXPONENT, 1.0))
-        scale = float(np.median(y[usable] / x[usable] ** exponent))
-        return float(np.median(setup)), scale, exponent, embree, float(np.max(x[usable]))
+        first, second = i[apart], j[apart]
+        exponent = min(max(median(np.log(y[second] / y[first]) / np.log(x[second] / x[first])), MIN_EXPONENT), 1.0)
+        scale = median(y[usable] / x[usable] ** exponent)
+        return median(setup), scale, exponent, embree, float(np.max(x[usable]))
     # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
     # fixed part paid once (its intercept).
     per_ray = EMBREE_FACTOR * embree
-    intercept = float(np.clip(np.median(rest - per_ray * rays), 0.0, float(rest.min())))
+    intercept = float(np.clip(median(rest - per_ray * rays), 0.0, float(rest.min())))
     if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
-        per_ray = float(np.median(np.maximum(rest - intercept, 0.0) / rays))
-    return float(np.median(setup)) + intercept, per_ray, 1.0, embree, np.inf
+        per_ray = median(np.maximum(rest - intercept, 0.0) / rays)
+    return median(setup) + intercept, per_ray, 1.0, embree, np.inf
 
 
 def _prior(effect) -> tuple[float, float, float, float, float]:
