@@ -72,6 +72,12 @@ MIN_EXPONENT = 0.6
 # window has moved on: atrium path1, the oak's shadows (35,000 rays, about 26 ms traced) were
 # priced from the small casters' frames alone once its frame left the window: 50 ms.
 ANCHOR_BASE = 2.0
+# An effect's costs are fitted again on every FIT_EVERY-th traced frame, and at once when a frame's
+# ms are more than SURPRISE (relative) from what the fit predicted for its rays: a frame that
+# agrees adds little to a median over WINDOW frames, and the fit cost 0.07-0.1 ms for each
+# effect of each traced frame (0.4 ms a frame on atrium).  The first FIT_EVERY samples are each fitted.
+FIT_EVERY = 4
+SURPRISE = 0.25
 RATIO_SMOOTHING = 0.3
 RATIO_RANGE = (1e-3, 1e3)
 MAX_MS = 1e12
@@ -88,6 +94,7 @@ class ItemCosts:
         self.learned: set[str] = set()  # the effects measured at least once in this replay
         self.ratio: dict[tuple[str, str], float] = {}
         self._fit = {effect: _prior(effect) for effect in EFFECTS}
+        self._since_fit = {effect: 0 for effect in EFFECTS}  # samples added since the last fit
         self._pooled = np.ones(len(EFFECTS))
         self.reconstruction = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # ms per pixel
 
@@ -113,6 +120,16 @@ class ItemCosts:
             beyond = np.divide(rays[:, j], within, out=np.ones_like(within), where=within > 0)
             out[:, j] = np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays[:, j])
         return out
+
+    def sample_ms(self, effect, rays: float, items: float) -> float:
+        """What the current fit predicts for a traced frame of ``effect``: its fixed part and
+        ``items`` items sharing ``rays`` (the fit's own terms, as in :meth:`rays_ms`)."""
+        fixed, scale, exponent, embree, largest = self._fit[effect]
+        items = max(float(items), 1.0)
+        each = float(rays) / items
+        within = min(each, largest)
+        beyond = each / within if within > 0 else 1.0
+        return fixed + items * max(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * each)
 
     def tick(self, wanted, traced) -> None:
         """After a frame: ``wanted`` / ``traced`` (3,) bool, the effects that had eligible items /
@@ -201,9 +218,18 @@ class ItemCosts:
             inside = float(embree_ms[j]) if np.isfinite(embree_ms[j]) else 0.0
             sample = (rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
                       float(np.count_nonzero(chosen[:, j])))
+            expected = self.sample_ms(effect, rays, sample[4])
+            octave = _octave(rays / sample[4])
+            # A new range of rays per item (beyond the largest measured, or an octave not anchored
+            # yet) is fitted at once too: it moves the fit's reach, not only its medians.
+            new_range = octave not in self.anchors[effect] or rays / sample[4] > self._fit[effect][4]
             self.samples[effect].append(sample)
-            self.anchors[effect][_octave(rays / sample[4])] = sample
-            self._fit[effect] = _fit(self._window(effect), effect == "shadows")
+            self.anchors[effect][octave] = sample
+            self._since_fit[effect] += 1
+            if len(self.samples[effect]) <= FIT_EVERY or self._since_fit[effect] >= FIT_EVERY or new_range or \
+                    not abs(ms - expected) <= SURPRISE * expected:
+                self._fit[effect] = _fit(self._window(effect), effect == "shadows")
+                self._since_fit[effect] = 0
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:

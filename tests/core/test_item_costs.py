@@ -203,3 +203,41 @@ def test_a_large_item_measured_once_keeps_its_price_after_the_window_moves_on():
     for _ in range(item_costs.STALE_FRAMES):
         costs.tick(np.array([True, False, False]), np.zeros(3, bool))
     assert not costs.anchors["shadows"] and not costs.samples["shadows"]
+
+
+def test_the_fit_waits_for_a_few_frames_unless_one_surprises_it():
+    """A traced frame whose ms agree with the fit (within SURPRISE) is fitted with the next ones,
+    every FIT_EVERY-th frame; a 10x spike (a cost that rose), or a larger item than any measured,
+    is fitted at once."""
+    costs = ItemCosts()
+    for casters in ([180], [840], [500, 500], [180], [840], [500, 500], [180], [840]):
+        power_frame(costs, casters)
+    probe = np.array([[600.0, 0, 0]])
+    settled = costs.predict(["C"], probe, [1.0])[0, 0]
+    power_frame(costs, [600], scale=0.05 * 1.1)  # 10% dearer: within SURPRISE of the fit
+    assert costs.predict(["C"], probe, [1.0])[0, 0] == settled  # not fitted yet
+    for _ in range(item_costs.FIT_EVERY - 1):
+        power_frame(costs, [600], scale=0.05 * 1.1)
+    # the FIT_EVERY-th frame fitted them: the fit of the window as it is now
+    assert costs._fit["shadows"] == item_costs._fit(costs._window("shadows"), True)
+    power_frame(costs, [600], scale=0.05 * 1.1)  # agrees: waits
+    assert costs._fit["shadows"] != item_costs._fit(costs._window("shadows"), True)
+    power_frame(costs, [600], scale=0.5, setup=30.0)  # a 10x spike: fitted at once
+    assert costs._fit["shadows"] == item_costs._fit(costs._window("shadows"), True)
+    reach = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
+    power_frame(costs, [22000])  # beyond the largest item measured
+    assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] != reach
+
+
+def test_a_fit_that_waits_prices_as_a_fit_of_every_frame_would_after_its_turn():
+    """Skipping the fit on frames that agree changes nothing once the FIT_EVERY-th frame comes:
+    the same window, the same fit."""
+    every, waiting = ItemCosts(), ItemCosts()
+    frames = [[180], [840], [500, 500], [300], [700], [600], [250], [900], [400], [650], [350], [800]]
+    for casters in frames:
+        power_frame(waiting, casters)
+        power_frame(every, casters)
+        every._fit["shadows"] = item_costs._fit(every._window("shadows"), True)
+    probe = np.array([[100.0, 0, 0], [700.0, 0, 0], [5000.0, 0, 0]])
+    assert np.allclose(waiting.predict(["A", "B", "C"], probe, [1.0] * 3),
+                       every.predict(["A", "B", "C"], probe, [1.0] * 3), rtol=0.05)
