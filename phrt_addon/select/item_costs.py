@@ -218,7 +218,7 @@ class ItemCosts:
             inside = float(embree_ms[j]) if np.isfinite(embree_ms[j]) else 0.0
             sample = (rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
                       float(np.count_nonzero(chosen[:, j])))
-            expected = self.sample_ms(effect, rays, sample[4])
+            predicted = self.sample_ms(effect, rays, sample[4])
             octave = _octave(rays / sample[4])
             # A new range of rays per item (beyond the largest measured, or an octave not anchored
             # yet) is fitted at once too: it moves the fit's reach, not only its medians.
@@ -227,7 +227,7 @@ class ItemCosts:
             self.anchors[effect][octave] = sample
             self._since_fit[effect] += 1
             if len(self.samples[effect]) <= FIT_EVERY or self._since_fit[effect] >= FIT_EVERY or new_range or \
-                    not abs(ms - expected) <= SURPRISE * expected:
+                    not abs(ms - predicted) <= SURPRISE * predicted:
                 self._fit[effect] = _fit(self._window(effect), effect == "shadows")
                 self._since_fit[effect] = 0
             self.learned.add(effect)

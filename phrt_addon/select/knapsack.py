@@ -236,8 +236,9 @@ def _choices_programme(values, weights, usable, groups, group_weights, capacity_
 
 def _programme(values, weights, usable, groups, group_weights, capacity_bins) -> np.ndarray:
     """:func:`_choices_programme`, from ``REDUCE_FROM`` rows after :func:`knapsack_bounds.reduce`
-    (when it looks :func:`~knapsack_bounds.promising`): the rows every optimum fixes, then the programme over the free rows within the bins the fixed
-    ones leave (their groups paid).  The same choice as the programme over every row."""
+    (when :func:`~knapsack_bounds.promising`): the rows every optimum fixes, then the programme
+    over the free rows within the bins the fixed ones leave (their groups paid).  The same choice
+    as the programme over every row."""
     masked = np.where(usable, values, -np.inf) if len(values) >= REDUCE_FROM else None
     ratio = None if masked is None else knapsack_bounds.promising(masked, weights, capacity_bins)
     if ratio is not None:
