@@ -244,7 +244,7 @@ class ItemCosts:
 
 
 def _octave(rays_per_item: float) -> int:
-    return math.floor(math.log(max(rays_per_item, 1.0)) / math.log(ANCHOR_BASE))
+    return math.floor(math.log2(max(rays_per_item, 1.0)) / math.log2(ANCHOR_BASE))  # exact at powers of 2
 
 
 @lru_cache(maxsize=8)

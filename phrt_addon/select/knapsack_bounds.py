@@ -51,7 +51,8 @@ def promising(values, weights, capacity, share: float = 0.25) -> float | None:
 
     An item is fixed only when its reduced value (value - r * bins, its best option) is further
     from 0 than the bound's gap L(r) - lower.  At the break ratio r0 the bound less the greedy
-    prefix's value is r0 x the bins the prefix leaves (Dantzig's bound): the gap is at most that.
+    prefix's value is r0 x the bins the prefix leaves (Dantzig's bound): the gap is about that
+    (at most, without the effects' fixed parts).
     Items of nearly equal value (the exploration's bonuses: the whole frame's value each) make that
     gap one item wide, and the reduction fixed 0 of 89 items while costing more than the
     programme it was to shorten.  A guess either way, never a different answer: the reduction is

@@ -229,15 +229,31 @@ def test_the_fit_waits_for_a_few_frames_unless_one_surprises_it():
     assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] != reach
 
 
-def test_a_fit_that_waits_prices_as_a_fit_of_every_frame_would_after_its_turn():
+def test_a_fit_that_waits_is_the_fit_of_every_frame_on_its_turn():
     """Skipping the fit on frames that agree changes nothing once the FIT_EVERY-th frame comes:
-    the same window, the same fit."""
+    the same window, the same fit; in between the two differ (the costs drift, each frame within
+    SURPRISE of the fit)."""
     every, waiting = ItemCosts(), ItemCosts()
-    frames = [[180], [840], [500, 500], [300], [700], [600], [250], [900], [400], [650], [350], [800]]
-    for casters in frames:
-        power_frame(waiting, casters)
-        power_frame(every, casters)
+    frames = [[180], [840], [500, 500], [300], [700], [600], [250], [800], [400], [650], [350], [800]]
+    differed = 0
+    for number, casters in enumerate(frames):
+        drift = 1.0 + 0.04 * number  # up 4% a frame
+        power_frame(waiting, casters, scale=0.05 * drift)
+        power_frame(every, casters, scale=0.05 * drift)
         every._fit["shadows"] = item_costs._fit(every._window("shadows"), True)
-    probe = np.array([[100.0, 0, 0], [700.0, 0, 0], [5000.0, 0, 0]])
-    assert np.allclose(waiting.predict(["A", "B", "C"], probe, [1.0] * 3),
-                       every.predict(["A", "B", "C"], probe, [1.0] * 3), rtol=0.05)
+        if waiting._since_fit["shadows"] == 0:
+            assert waiting._fit["shadows"] == every._fit["shadows"]
+        else:
+            differed += waiting._fit["shadows"] != every._fit["shadows"]
+    assert differed > 0
+
+
+def test_an_item_beyond_the_largest_measured_is_fitted_at_once():
+    """A frame that agrees with the fit but whose item has more rays than any measured (in an
+    octave already anchored) moves the fit's reach at once."""
+    costs = ItemCosts()
+    for casters in ([180], [840], [500, 500], [180], [840], [500, 500], [180], [840]):
+        power_frame(costs, casters)
+    assert costs._fit["shadows"][4] == pytest.approx(840)
+    power_frame(costs, [1000])  # log2 1000 and 840: both octave 9; the same law
+    assert costs._fit["shadows"][4] == pytest.approx(1000)
