@@ -29,10 +29,9 @@ A band in time
     The time left moves from frame to frame with the raster half's own noise (atrium path1 at
     0.75 of the way, a 63 ms budget: between 2 and 26 ms within 20 frames, often halving or
     doubling from one frame to the next); without a band every move forces a drop or allows an
-    add.  An item not traced last frame must fit with
-    ``ADD_SLACK`` to spare in the time left the recent frames could count on (the
-    ``STEADY_QUANTILE``-th percentile of the last ``STEADY_FRAMES``, this one's included), not in
-    this frame's peak.  An item traced last frame, and an effect whose fixed part was paid last
+    add.  An item not traced last frame must fit (``ADD_SLACK`` to spare: 0 since 6 Dec 2026) in
+    the time left the recent frames could count on (the ``STEADY_QUANTILE``-th percentile of the
+    last ``STEADY_FRAMES``, this one's included), not in this frame's peak.  An item traced last frame, and an effect whose fixed part was paid last
     frame, are charged ``HOLD`` less than predicted (the overrun this allows is at most
     HOLD / (1 - HOLD) of the time left).  An item dropped while it could still compete waits
     ``REST`` frames before it is added again; an item that left the view does not wait when it
@@ -72,9 +71,10 @@ from ..finite import finite
 from ..schema import EFFECTS
 
 SWITCH = 0.25
-# An item not traced last frame is charged this share more than its predicted ms: it must fit
-# with room to spare, so the time left's frame-to-frame noise does not toggle it.
-ADD_SLACK = 0.25
+# An item not traced last frame is charged this share more than its predicted ms, on top of being
+# sized for the steady time left (0.25 until 6 Dec 2026: with it tight budgets added nothing; the
+# training A/B that set 0: docs/selection.md, "Adds without slack").
+ADD_SLACK = 0.0
 # An item traced last frame is charged this share less (it keeps its place through the time
 # left's noise); an item dropped while it competed waits REST frames before it is added again.
 HOLD = 0.1

@@ -170,20 +170,24 @@ def test_the_mirror_outranks_the_matte_reflection_from_the_first_frame():
 
 
 def test_with_tiers_an_item_that_does_not_fit_at_full_rate_is_bought_at_a_lower_one():
-    # Full costs 10 ms; a new item is charged 1.25x: full 12.5, half 11.25, quarter 8.75 ms.
+    # Full costs 10 ms; a new item is charged (1 + ADD_SLACK) x each rate's share of it.
     def choice_at(time_left, tiers=True):
         selector = BenefitSelector()
         selector.observe_time(1.0, 1.0)
         return selector.choose(["Mirror"], np.array([[False, True, False]]), np.array([[0, 500, 0]]),
                                np.array([[0, 0.4, 0]]), np.ones(1), np.array([[0, 10.0, 0]]), time_left, 0.0,
                                tiers=tiers)
-    assert not choice_at(8.0).chosen.any()
-    quarter = choice_at(9.5)
+    charged = {rate: 10.0 * share * (1.0 + benefit_selection.ADD_SLACK)
+               for rate, share in benefit_selection.TIER_COST.items()}
+    assert charged[0.25] < charged[0.5] < charged[1.0]
+    assert not choice_at(charged[0.25] - 0.5).chosen.any()
+    quarter = choice_at((charged[0.25] + charged[0.5]) / 2)
     assert quarter.rate[0, 1] == 0.25 and quarter.rates["reflections"][0] == 0.25
     assert quarter.chosen_cost_ms[0, 1] == pytest.approx(10.0 * benefit_selection.TIER_COST[0.25])
-    assert choice_at(12.0).rate[0, 1] == 0.5
-    assert choice_at(13.0).rate[0, 1] == 1.0
-    assert not choice_at(12.0, tiers=False).chosen.any()  # all or nothing: nothing
+    between = (charged[0.5] + charged[1.0]) / 2
+    assert choice_at(between).rate[0, 1] == 0.5
+    assert choice_at(charged[1.0] + 0.5).rate[0, 1] == 1.0
+    assert not choice_at(between, tiers=False).chosen.any()  # all or nothing: nothing
 
 
 def test_a_frame_with_tiers_traces_at_the_chosen_rate_and_writes_the_rate_pass():
