@@ -15,7 +15,7 @@ per element per 100 frames.  Prints the table and writes ``OUT/constant_ab.csv``
 
     python tools/constant_ab.py arcade --path path1 --frames 1-120 \\
         --constant benefit_selection.ADD_SLACK --values 0.25,0 [--budget-at 0.25,0.5] \\
-        [--resolution 320x240] [--selection benefit] [--out out/constant-ab/arcade-path1]
+        [--resolution 320x240] [--selection benefit] [--block N] [--out out/constant-ab/arcade-path1]
 
 ``--constant`` names a number in a module of ``phrt_addon/select`` that the selection reads when
 it runs (a module constant, not one copied into an object at its creation); the first of
@@ -24,6 +24,7 @@ it runs (a module constant, not one copied into an object at its creation); the 
 from __future__ import annotations
 
 import argparse
+import ast
 import csv
 import importlib
 import shutil
@@ -40,9 +41,14 @@ class UsageError(Exception):
     """Bad arguments: one line, exit 2."""
 
 
+class RunFailed(Exception):
+    """A run failed while rendering: one line, exit 1."""
+
+
 def parse_constant(spec: str):
-    """(module, attribute name) of ``module.NAME`` among ``phrt_addon.select``'s modules; the
-    attribute must exist and be a number."""
+    """(module, attribute name) of ``module.NAME`` among ``phrt_addon.select``'s modules: a number
+    the module itself assigns at its top level (one it imports from another module is read there,
+    so setting it here would change nothing)."""
     module_name, _, name = spec.rpartition(".")
     if not module_name or not name:
         raise UsageError(f"--constant {spec!r}: give it as module.NAME, e.g. benefit_selection.ADD_SLACK")
@@ -53,7 +59,22 @@ def parse_constant(spec: str):
     value = getattr(module, name, None)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise UsageError(f"--constant {spec!r}: {module_name} has no number named {name}")
+    tree = ast.parse(Path(module.__file__).read_text(encoding="utf-8"))
+    assigned = {target.id for node in tree.body if isinstance(node, (ast.Assign, ast.AnnAssign))
+                for target in (node.targets if isinstance(node, ast.Assign) else [node.target])
+                if isinstance(target, ast.Name)}
+    if name not in assigned:
+        raise UsageError(f"--constant {spec!r}: {module_name} imports {name}; name the module that defines it")
     return module, name
+
+
+def as_values(module, name, values) -> list:
+    """``values`` as the constant's own type: an integer constant takes whole numbers only."""
+    if isinstance(getattr(module, name), int):
+        if not all(float(value).is_integer() for value in values):
+            raise UsageError(f"--values: {name} is a whole number; give whole numbers")
+        return [int(value) for value in values]
+    return [float(value) for value in values]
 
 
 def parse_numbers(text: str, option: str) -> list[float]:
@@ -63,10 +84,12 @@ def parse_numbers(text: str, option: str) -> list[float]:
         raise UsageError(f"{option} {text!r}: give numbers separated by commas") from None
     if not values or not all(np.isfinite(values)):
         raise UsageError(f"{option} {text!r}: give finite numbers separated by commas")
+    if len(set(values)) != len(values):
+        raise UsageError(f"{option} {text!r}: each value once")
     return values
 
 
-def compare(flip_by_run: dict, baseline, *, resamples: int = 2000, seed: int = 0) -> dict:
+def compare(flip_by_run: dict, baseline, *, resamples: int = 2000, seed: int = 0, block: int | None = None) -> dict:
     """{run key: (frames, mean LDR-FLIP, relative difference to ``baseline``'s run, low, high,
     verdict)} over the frames every run has; ``flip_by_run`` {run key: {frame: LDR-FLIP}}."""
     from phrt.phrt_addon.report.captured import ratio_interval
@@ -81,22 +104,33 @@ def compare(flip_by_run: dict, baseline, *, resamples: int = 2000, seed: int = 0
                         "no difference")
             continue
         difference = float(np.sum(run - base)) / total
-        low, high = ratio_interval(run - base, base, resamples=resamples, seed=seed)
+        low, high = ratio_interval(run - base, base, resamples=resamples, seed=seed, block=block)
         verdict = "no difference" if low is None or high is None or low <= 0.0 <= high else \
             ("lower" if difference < 0 else "higher")
         out[key] = (len(frames), float(run.mean()), difference, low, high, verdict)
     return out
 
 
-def reusable(run_dir: Path, frame_range, resolution) -> bool:
-    """Whether ``run_dir`` holds a complete run of these frames at this resolution."""
-    from phrt.phrt_addon.runs import run_files
+def reusable(run_dir: Path, mode: str, label: str, path: str, frame_range, resolution) -> bool:
+    """Whether ``run_dir`` holds a complete ``mode`` run of this scene's path, frames and resolution,
+    with its frames written, made on this CPU."""
+    from phrt.phrt_addon.runs import run_files, summary as run_summary
     try:
         summary = run_files.read_summary(run_dir)
     except (FileNotFoundError, ValueError):
         return False
-    return not summary.get("partial", False) and summary.get("frame_range") == list(frame_range) and \
-        summary.get("resolution") == list(resolution)
+    wanted = {"mode": mode, "scene": label, "path": path, "frame_range": list(frame_range),
+              "resolution": list(resolution), "images": "exr"}
+    return not summary.get("partial", False) and all(summary.get(key) == value for key, value in wanted.items()) \
+        and (summary.get("machine") or {}).get("cpu_model") == run_summary.machine_info()["cpu_model"]
+
+
+def close(run) -> None:
+    """Close ``run`` if it is still open (a failed step closed it already)."""
+    try:
+        run.finish(cancelled=True)
+    except Exception:  # already finished
+        pass
 
 
 def run_path(args, module, name, values, fractions, out: Path) -> list[dict]:
@@ -116,36 +150,45 @@ def run_path(args, module, name, values, fractions, out: Path) -> list[dict]:
     frame_range = camera_path.parse_frames(args.frames, camera_path.path_frame_range(scene, camera))
     out.mkdir(parents=True, exist_ok=True)
     keys = [(fraction, value) for fraction in fractions for value in values]
-    folders = {key: out / f"at{key[0]:g}-{name}-{key[1]:g}" for key in keys}
+    folders = {key: out / f"at{key[0]!r}-{name}-{key[1]!r}" for key in keys}
     default = getattr(module, name)
     engine_session = session.current()
     with blender_process.quiet_stdout():
         for mode in ("RASTER", "RAYTRACE"):
-            if not reusable(out / mode.lower(), frame_range, args.resolution):
+            if not reusable(out / mode.lower(), mode, label, camera.name, frame_range, args.resolution):
                 shutil.rmtree(out / mode.lower(), ignore_errors=True)
                 replay.replay(scene, camera, frame_range, mode, out / mode.lower(), images="exr", scene_label=label)
-        runs = []
-        for key in keys:
-            shutil.rmtree(folders[key], ignore_errors=True)
-            runs.append(replay.ReplayRun(scene, camera, frame_range, "HYBRID", folders[key], images="exr",
-                                         scene_label=label, budget_at=key[0], budget_search_dirs=[out],
-                                         overrides={"selection": args.selection.upper()}, restores_scene=False))
-        value_of = {id(run): key[1] for run, key in zip(runs, keys)}
+        runs, value_of, failed = [], {}, {}
 
         def before(run):
             engine_session.replay = run.state  # the frame renderer this render uses
             setattr(module, name, value_of[id(run)])
 
         try:
+            for key in keys:
+                shutil.rmtree(folders[key], ignore_errors=True)
+                runs.append(replay.ReplayRun(scene, camera, frame_range, "HYBRID", folders[key], images="exr",
+                                             scene_label=label, budget_at=key[0], budget_search_dirs=[out],
+                                             overrides={"selection": args.selection.upper()}, restores_scene=False))
+                value_of[id(runs[-1])] = key[1]
             failed = step_in_lockstep(runs, before_step=before)
-            for position in reversed(range(len(runs))):
-                runs[position].finish(cancelled=position in failed)
+            for position in reversed(range(len(runs))):  # the first run's state restored last
+                if position in failed:
+                    close(runs[position])
+                else:
+                    runs[position].finish()
+        except BaseException:
+            for run in reversed(runs):
+                close(run)
+            raise
         finally:
             setattr(module, name, default)
             engine_session.replay = None
-            runs[0].restore_scene()
+            if runs:
+                runs[0].restore_scene()
     if failed:
-        raise RuntimeError(f"{len(failed)} run(s) failed: {next(iter(failed.values()))}")
+        first = next(iter(failed.values()))
+        raise RunFailed(f"{len(failed)} run(s) failed: {type(first).__name__}: {first}")
     reference = run_files.run_images(out / "raytrace")
     rows = []
     for fraction in fractions:
@@ -154,7 +197,7 @@ def run_path(args, module, name, values, fractions, out: Path) -> list[dict]:
             images = run_files.run_images(folders[(fraction, value)])
             flips[value] = {frame: metrics.flip(metrics.read_image(reference[frame]), metrics.read_image(path))
                             for frame, path in images.items() if frame in reference and frame > frame_range[0]}
-        compared = compare(flips, values[0])
+        compared = compare(flips, values[0], block=args.block)
         for value in values:
             summary = run_files.read_summary(folders[(fraction, value)])
             frames, mean_flip, difference, low, high, verdict = compared[value]
@@ -190,7 +233,15 @@ def parse_args(argv):
     parser.add_argument("--resolution", default="320x240")
     parser.add_argument("--selection", default="benefit", choices=("benefit", "paper"))
     parser.add_argument("--out", default=None, help="default out/constant-ab/<scene>-<path>")
+    parser.add_argument("--block", type=int, default=None,
+                        help="the bootstrap's block of frames (default: the yardstick's, n ** (1/3))")
+
+    def error(message):
+        raise UsageError(message)
+    parser.error = error
     args = parser.parse_args(argv)
+    if args.block is not None and args.block < 1:
+        raise UsageError(f"--block {args.block}: at least 1 frame")
     try:
         width, height = (int(part) for part in args.resolution.lower().split("x"))
     except ValueError:
@@ -205,7 +256,7 @@ def main(argv=None) -> int:
     try:
         args = parse_args(argv)
         module, name = parse_constant(args.constant)
-        values = parse_numbers(args.values, "--values")
+        values = as_values(module, name, parse_numbers(args.values, "--values"))
         fractions = parse_numbers(args.budget_at, "--budget-at")
         if len(set(values)) < 2:
             raise UsageError(f"--values {args.values!r}: give at least two different values")
@@ -217,7 +268,10 @@ def main(argv=None) -> int:
     out = Path(args.out) if args.out else Path("out") / "constant-ab" / f"{Path(args.scene).stem}-{args.path}"
     try:
         rows = run_path(args, module, name, values, fractions, out)
-    except Exception as error:  # a scene or path that is not there, a run that failed: one line
+    except RunFailed as error:  # the renders' failure, not the user's: exit 1
+        print(f"constant-ab: {error}", file=sys.stderr)
+        return 1
+    except Exception as error:  # a scene or path that is not there: one line, exit 2
         print(f"constant-ab: {str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__}",
               file=sys.stderr)
         return 2

@@ -169,8 +169,10 @@ def test_the_mirror_outranks_the_matte_reflection_from_the_first_frame():
     assert per_pixel_mirror > 5 * per_pixel_block
 
 
-def test_with_tiers_an_item_that_does_not_fit_at_full_rate_is_bought_at_a_lower_one():
-    # Full costs 10 ms; a new item is charged (1 + ADD_SLACK) x each rate's share of it.
+def test_with_tiers_an_item_that_does_not_fit_at_full_rate_is_bought_at_a_lower_one(monkeypatch):
+    # Full costs 10 ms; a new item is charged (1 + ADD_SLACK) x each rate's share of it: with the
+    # slack at 0.25 (a value that tells the charge from the cost) full 12.5, half 11.25, quarter 8.75.
+    monkeypatch.setattr(benefit_selection, "ADD_SLACK", 0.25)
     def choice_at(time_left, tiers=True):
         selector = BenefitSelector()
         selector.observe_time(1.0, 1.0)
@@ -271,9 +273,11 @@ def test_the_priors_read_back_is_not_taken_from_the_time_left_twice(monkeypatch)
     assert seen[0] == pytest.approx(max(stats["raster_ms"] - stats["readback_ms"], 0.0), abs=1e-6)
 
 
-def test_a_traced_item_holds_through_the_time_lefts_noise_and_an_added_one_needs_room_to_spare():
+def test_a_traced_item_holds_through_the_time_lefts_noise_and_an_added_one_needs_room_to_spare(monkeypatch):
     """The band in time (HOLD, ADD_SLACK): an item costing 10 ms is kept while the time left swings
-    around it (9-11 ms), and an item not traced last frame is added only with ADD_SLACK to spare."""
+    around it (9-11 ms), and an item not traced last frame is added only with ADD_SLACK to spare
+    (set to 0.25 here, its value until 6 Dec 2026: with 0 the spare is none)."""
+    monkeypatch.setattr(benefit_selection, "ADD_SLACK", 0.25)
     names, pixels, priors, cost = ["A"], [[0, 100, 0]], [[0, 0.1, 0]], [[0, 10, 0]]
 
     def measured_selector():

@@ -21,9 +21,30 @@ def test_the_constant_is_a_number_of_a_selection_module(tool):
     from phrt.phrt_addon.select import benefit_selection
     module, name = tool.parse_constant("benefit_selection.ADD_SLACK")
     assert module is benefit_selection and name == "ADD_SLACK"
-    for bad in ("ADD_SLACK", "no_such_module.X", "benefit_selection.NO_SUCH", "benefit_selection.BenefitSelector"):
+    for bad in ("ADD_SLACK", "no_such_module.X", "benefit_selection.NO_SUCH", "benefit_selection.BenefitSelector",
+                "benefit_selection.STEADY_FRAMES"):  # the last imported from frame_time: set there, it changes nothing
         with pytest.raises(tool.UsageError):
             tool.parse_constant(bad)
+    module, name = tool.parse_constant("frame_time.STEADY_FRAMES")
+    assert tool.as_values(module, name, [8.0, 12.0]) == [8, 12]  # an integer constant stays one
+    with pytest.raises(tool.UsageError):
+        tool.as_values(module, name, [8.0, 8.5])
+
+
+def test_only_a_complete_reference_run_of_the_same_path_frames_and_machine_is_reused(tool, tmp_path):
+    import json
+    from phrt.phrt_addon.runs import summary as run_summary
+    summary = {"mode": "RASTER", "scene": "arcade", "path": "path1", "frame_range": [1, 24],
+               "resolution": [320, 240], "images": "exr", "machine": run_summary.machine_info()}
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    assert tool.reusable(tmp_path, "RASTER", "arcade", "path1", (1, 24), (320, 240))
+    for changed in (("RAYTRACE", "arcade", "path1", (1, 24), (320, 240)), ("RASTER", "atrium", "path1", (1, 24), (320, 240)),
+                    ("RASTER", "arcade", "path2", (1, 24), (320, 240)), ("RASTER", "arcade", "path1", (1, 48), (320, 240)),
+                    ("RASTER", "arcade", "path1", (1, 24), (640, 480))):
+        assert not tool.reusable(tmp_path, *changed)
+    (tmp_path / "summary.json").write_text(json.dumps(dict(summary, partial=True)))
+    assert not tool.reusable(tmp_path, "RASTER", "arcade", "path1", (1, 24), (320, 240))
+    assert not tool.reusable(tmp_path / "nothing", "RASTER", "arcade", "path1", (1, 24), (320, 240))
 
 
 @pytest.mark.parametrize("argv", [
@@ -34,6 +55,9 @@ def test_the_constant_is_a_number_of_a_selection_module(tool):
      "--budget-at", "1.5"],
     ["arcade", "--path", "path1", "--constant", "benefit_selection.ADD_SLACK", "--values", "0.25,0",
      "--resolution", "320by240"],
+    ["arcade", "--path", "path1", "--constant", "benefit_selection.ADD_SLACK", "--values", "0.25,0,0"],
+    ["arcade", "--constant", "benefit_selection.ADD_SLACK", "--values", "0.25,0"],  # no --path
+    ["arcade", "--path", "path1", "--constant", "benefit_selection.ADD_SLACK", "--values", "0.25,0", "--block", "0"],
 ])
 def test_bad_arguments_exit_2_with_one_line_and_render_nothing(tool, argv, capsys, monkeypatch):
     monkeypatch.setattr(tool, "run_path", lambda *a, **k: pytest.fail("rendered despite bad arguments"))
