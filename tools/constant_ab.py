@@ -212,7 +212,8 @@ def run_path(args, module, name, values, fractions, out: Path) -> list[dict]:
 def table(rows, name) -> str:
     def percent(value):
         return "" if value is None else f"{100.0 * value:+.1f}%"
-    lines = [f"| budget at | ms | {name} | frames | LDR-FLIP | vs first [90%] | verdict | p95 / budget | traced | flips / 100 |",
+    lines = [f"| budget at | ms | {name} | frames | LDR-FLIP | vs first [90%] | verdict | p95 / budget | traced "
+             "| flips / 100 |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         interval = "" if row["low"] is None else f" [{percent(row['low'])}, {percent(row['high'])}]"

@@ -31,11 +31,11 @@ A band in time
     doubling from one frame to the next); without a band every move forces a drop or allows an
     add.  An item not traced last frame must fit (``ADD_SLACK`` to spare: 0 since 6 Dec 2026) in
     the time left the recent frames could count on (the ``STEADY_QUANTILE``-th percentile of the
-    last ``STEADY_FRAMES``, this one's included), not in this frame's peak.  An item traced last frame, and an effect whose fixed part was paid last
-    frame, are charged ``HOLD`` less than predicted (the overrun this allows is at most
-    HOLD / (1 - HOLD) of the time left).  An item dropped while it could still compete waits
-    ``REST`` frames before it is added again; an item that left the view does not wait when it
-    returns.
+    last ``STEADY_FRAMES``, this one's included), not in this frame's peak.  An item traced last
+    frame, and an effect whose fixed part was paid last frame, are charged ``HOLD`` less than
+    predicted (the overrun this allows is at most HOLD / (1 - HOLD) of the time left).  An item
+    dropped while it could still compete waits ``REST`` frames before it is added again; an item
+    that left the view does not wait when it returns.
 A guard on flips
     The pop is the element's, whichever of its effects comes back.  An element none of whose
     items is traced is taken again only ``FLIP_GAP`` frames after its last flip (a change of its

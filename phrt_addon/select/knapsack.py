@@ -57,7 +57,8 @@ def _in_bins(ms, capacity, n_bins) -> np.ndarray:
     """Costs (ms) in whole bins of ``capacity``, rounded up (less a relative 1e-9 that float
     division adds to whole bins); at most n_bins + 1 (does not fit), NaN as that too."""
     if capacity > 0 and capacity <= LARGE:  # at most 2 x n_bins before the cap: no overflow, no errstate
-        scaled = np.minimum(np.minimum(np.asarray(ms, np.float64), 2.0 * capacity) / capacity * n_bins, n_bins + 1.0)
+        capped = np.minimum(np.asarray(ms, np.float64), 2.0 * capacity)
+        scaled = np.minimum(capped / capacity * n_bins, n_bins + 1.0)
     else:
         with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
             scaled = np.minimum(np.asarray(ms, np.float64) / capacity * n_bins, n_bins + 1.0)

@@ -38,9 +38,9 @@ def test_only_a_complete_reference_run_of_the_same_path_frames_and_machine_is_re
                "resolution": [320, 240], "images": "exr", "machine": run_summary.machine_info()}
     (tmp_path / "summary.json").write_text(json.dumps(summary))
     assert tool.reusable(tmp_path, "RASTER", "arcade", "path1", (1, 24), (320, 240))
-    for changed in (("RAYTRACE", "arcade", "path1", (1, 24), (320, 240)), ("RASTER", "atrium", "path1", (1, 24), (320, 240)),
-                    ("RASTER", "arcade", "path2", (1, 24), (320, 240)), ("RASTER", "arcade", "path1", (1, 48), (320, 240)),
-                    ("RASTER", "arcade", "path1", (1, 24), (640, 480))):
+    same = ("RASTER", "arcade", "path1", (1, 24), (320, 240))
+    for position, other in ((0, "RAYTRACE"), (1, "atrium"), (2, "path2"), (3, (1, 48)), (4, (640, 480))):
+        changed = same[:position] + (other,) + same[position + 1:]
         assert not tool.reusable(tmp_path, *changed)
     (tmp_path / "summary.json").write_text(json.dumps(dict(summary, partial=True)))
     assert not tool.reusable(tmp_path, "RASTER", "arcade", "path1", (1, 24), (320, 240))
