@@ -161,17 +161,17 @@ def _lockstep(plan, folder, jobs, scene, camera, on_frame=None) -> list:
             run, index = runs[position], opened[position]
             if position in failed:
                 results[index] = (None, _failure(run, failed[position]))
-                _close(run)  # a stopped render leaves its run open; a failed step closed it
+                close_run(run)  # a stopped render leaves its run open; a failed step closed it
                 continue
             try:
                 results[index] = (run.finish(), None)
             except Exception as error:  # summary.json could not be written (a full disk)
                 results[index] = (None, _failure(run, error))
-                _close(run)
+                close_run(run)
         return results
     except BaseException:
         for run in reversed(runs):
-            _close(run)
+            close_run(run)
         for job in jobs:
             shutil.rmtree(plan_module.partial_dir(folder, job), ignore_errors=True)
         raise
@@ -181,7 +181,7 @@ def _lockstep(plan, folder, jobs, scene, camera, on_frame=None) -> list:
             runs[0].restore_scene()
 
 
-def _close(run):
+def close_run(run):
     """Close ``run`` if it is still open (its lock, renderer and GPU objects released), whatever
     else fails."""
     try:

@@ -125,18 +125,12 @@ def reusable(run_dir: Path, mode: str, label: str, path: str, frame_range, resol
         and (summary.get("machine") or {}).get("cpu_model") == run_summary.machine_info()["cpu_model"]
 
 
-def close(run) -> None:
-    """Close ``run`` if it is still open (a failed step closed it already)."""
-    try:
-        run.finish(cancelled=True)
-    except Exception:  # already finished
-        pass
 
 
 def run_path(args, module, name, values, fractions, out: Path) -> list[dict]:
     """Render the runs (see the module docstring); one row per (budget at, value)."""
     from phrt.cli import blender_process
-    from phrt.cli.lockstep import step_in_lockstep
+    from phrt.cli.lockstep import close_run, step_in_lockstep
     from phrt.engine import session
     from phrt.engine.runs import camera_path, replay
     from phrt.phrt_addon.report import metrics
@@ -174,12 +168,12 @@ def run_path(args, module, name, values, fractions, out: Path) -> list[dict]:
             failed = step_in_lockstep(runs, before_step=before)
             for position in reversed(range(len(runs))):  # the first run's state restored last
                 if position in failed:
-                    close(runs[position])
+                    close_run(runs[position])
                 else:
                     runs[position].finish()
         except BaseException:
             for run in reversed(runs):
-                close(run)
+                close_run(run)
             raise
         finally:
             setattr(module, name, default)

@@ -112,24 +112,14 @@ class ItemCosts:
         rays = np.maximum(finite(rays, nan=0.0, posinf=MAX_MS), 0.0)
         out = np.empty_like(rays)
         for j, effect in enumerate(EFFECTS):
-            _, scale, exponent, embree, largest = self._fit[effect]
-            # Beyond the largest item measured, the slowest growth measured (MIN_EXPONENT): an
-            # optimistic price, so an item larger than any traced yet is tried and measured once
-            # (its first traced frame corrects the fit) instead of being priced out for good.
-            within = np.minimum(rays[:, j], largest)
-            beyond = np.divide(rays[:, j], within, out=np.ones_like(within), where=within > 0)
-            out[:, j] = np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays[:, j])
+            out[:, j] = _item_ms(self._fit[effect], rays[:, j])
         return out
 
     def sample_ms(self, effect, rays: float, items: float) -> float:
         """What the current fit predicts for a traced frame of ``effect``: its fixed part and
-        ``items`` items sharing ``rays`` (the fit's own terms, as in :meth:`rays_ms`)."""
-        fixed, scale, exponent, embree, largest = self._fit[effect]
+        ``items`` items sharing ``rays`` (priced as :meth:`rays_ms` prices them)."""
         items = max(float(items), 1.0)
-        each = float(rays) / items
-        within = min(each, largest)
-        beyond = each / within if within > 0 else 1.0
-        return fixed + items * max(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * each)
+        return self._fit[effect][0] + items * float(_item_ms(self._fit[effect], np.array([float(rays) / items]))[0])
 
     def tick(self, wanted, traced) -> None:
         """After a frame: ``wanted`` / ``traced`` (3,) bool, the effects that had eligible items /
@@ -241,6 +231,17 @@ class ItemCosts:
         recent = list(self.samples[effect])
         covered = {_octave(sample[0] / max(sample[4], 1.0)) for sample in recent}
         return recent + [sample for octave, sample in self.anchors[effect].items() if octave not in covered]
+
+
+def _item_ms(fit, rays: np.ndarray) -> np.ndarray:
+    """ms of items of ``rays`` each (a 1-d array, finite, >= 0) under ``fit``, fixed part excluded.
+    Beyond the largest item measured, the slowest growth measured (MIN_EXPONENT): an optimistic
+    price, so an item larger than any traced yet is tried and measured once (its first traced frame
+    corrects the fit) instead of being priced out for good."""
+    _, scale, exponent, embree, largest = fit
+    within = np.minimum(rays, largest)
+    beyond = np.divide(rays, within, out=np.ones_like(within), where=within > 0)
+    return np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays)
 
 
 def _octave(rays_per_item: float) -> int:

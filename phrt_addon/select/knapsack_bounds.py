@@ -42,10 +42,6 @@ def _break(values, weights, capacity) -> tuple[float, float]:
     return float(ratio[order][at]), float(capacity) - (float(spent[at - 1]) if at else 0.0)
 
 
-def _break_ratio(values, weights, capacity) -> float:
-    return _break(values, weights, capacity)[0]
-
-
 def promising(values, weights, capacity, share: float = 0.25) -> float | None:
     """Whether :func:`reduce` can be expected to fix at least ``share`` of the items, from one sort.
 
@@ -144,7 +140,7 @@ def best_multiplier(values, weights, groups, group_weights, capacity, break_rati
     """The r >= 0 of the smallest bound L(r) among scales of the break ratio (L is convex in r).
     With one option per item (0/1) the break ratio is the optimum but for the groups' weights: one
     grid; with several options a second, finer grid between the neighbours of the best."""
-    ratio = _break_ratio(values, weights, capacity) if break_ratio is None else float(break_ratio)
+    ratio = _break(values, weights, capacity)[0] if break_ratio is None else float(break_ratio)
     tried = np.unique(ratio * _SCALES)
     at = int(np.argmin(bound(values, weights, groups, group_weights, capacity, tried)))
     if values.shape[1] == 1:
