@@ -48,6 +48,7 @@ class GPUFrame:
         self.shaders = {}  # name -> shader, for this frame's passes
         self.fused = False  # all lights in one pass, which also composites the opaque layer
         self.transparent_drawn = False
+        self.faces = False  # the G-buffer pass also wrote the face normals (gbuffer.draws_faces)
         self.measure = False  # shade() also writes what the traced terms changed
         self.traced_flags = (0.0, 0.0, 0.0)
         self._gbuffer = None
@@ -67,7 +68,9 @@ class GPUFrame:
         start = time.perf_counter()
         created_before = resources.uploads + sum(resources.created[kind] for kind in ("shader", "target"))
         setup_start = time.perf_counter()
-        self.shaders = {name: resources.shader(name, build) for name, build in BUILDERS.items()}
+        self.faces = gbuffer.draws_faces(self.snapshot)
+        unused = gbuffer.unused_shaders(self.faces)
+        self.shaders = {name: resources.shader(name, build) for name, build in BUILDERS.items() if name not in unused}
         counts = lighting.light_counts(len(self.snapshot.lights))
         # All lights in one pass: that pass also composites the opaque layer (one full-screen
         # pass less), if the implementation has the sampler it needs.
@@ -114,7 +117,7 @@ class GPUFrame:
         w, h) only that rectangle, the other pixels cleared.  A read-back is kept for the frame:
         a whole one serves any later call, a rectangle the same rectangle."""
         if self._gbuffer is None or (self._gbuffer_rect is not None and rect != self._gbuffer_rect):
-            self._gbuffer = readback.read_gbuffer(gpu_module(), self, self.transparent_drawn, rect)
+            self._gbuffer = readback.read_gbuffer(gpu_module(), self, self.transparent_drawn, rect, self.faces)
             self._gbuffer_rect = rect
         return self._gbuffer
 

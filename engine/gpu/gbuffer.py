@@ -13,6 +13,11 @@ from ...phrt_addon.raster import draw_chunks
 from . import fullscreen, readback, uniforms
 
 TEXTURED, UNTEXTURED, RESOLVE = "gbuffer", "gbuffer_untextured", "resolve"
+# The variants that also write the face normal (the "geometric" targets), where the trace stage's
+# rays leave from: atrium RAYTRACE at 320x240, the trace stage 35.2 -> 30.9 ms a frame (the
+# normals from neighbouring positions on the CPU took 7 ms, and straddled edges of curved
+# surfaces), the G-buffer pass and its read-back 0.6 ms more.  Drawn only by frames that may trace.
+FACES = "_faces"
 
 # What the id targets can tell apart: element index + 1 ("none" = 0) in the 32-bit element target,
 # material index + 1 in the float position target's w (exact to 2^24).
@@ -69,6 +74,17 @@ void main() {
   /* 8 bits per channel of sqrt(albedo): a game G-buffer's precision, where it matters (darks). */
   out_albedo = vec4(sqrt(albedo.rgb), clamp(params.y, 0.0, 1.0));
   out_element = uint(ids.y + 1);
+#if WITH_FACES
+  /* The face normal, for the rays that leave this surface: the position's screen derivatives lie
+     in the triangle's plane (a 2x2 quad's helper pixels extrapolate the same triangle).  Camera
+     relative positions keep them precise at any world coordinate; zero where degenerate (the
+     tracer then leaves towards the camera). */
+  /* Stored as phrt_addon/raster/gbuffer.py encode_face_normals (unorm8: (n + 1) / 2, alpha: found). */
+  vec3 face = cross(dFdx(v_position), dFdy(v_position));
+  float face_length = length(face);
+  bool usable = face_length > 0.0 && !isinf(face_length) && !isnan(face_length);
+  out_geometric = usable ? vec4(face / face_length * 0.5 + 0.5, 1.0) : vec4(0.5, 0.5, 0.5, 0.0);
+#endif
 }
 """
 
@@ -92,11 +108,13 @@ void main() {
 """
 
 
-def build(gpu, textured=True):
+def build(gpu, textured=True, faces=False):
     """The G-buffer pass; ``textured``: the base colour is multiplied by ``base_tex`` (the
-    variant for materials with an image; the other reads no texture)."""
+    variant for materials with an image; the other reads no texture); ``faces``: also writes the
+    face normal (a fifth target)."""
     info = gpu.types.GPUShaderCreateInfo()
     info.define("WITH_TEXTURE", "1" if textured else "0")
+    info.define("WITH_FACES", "1" if faces else "0")
     info.typedef_source(uniforms.glsl("FrameData", uniforms.FRAME))
     info.uniform_buf(0, "FrameData", "frame")
     info.push_constant("MAT4", "model")
@@ -117,6 +135,8 @@ def build(gpu, textured=True):
     info.fragment_out(1, "VEC4", "out_normal")
     info.fragment_out(2, "VEC4", "out_albedo")
     info.fragment_out(3, "UINT", "out_element")
+    if faces:
+        info.fragment_out(4, "VEC4", "out_geometric")
     info.vertex_source(GBUFFER_VERT)
     info.fragment_source(GBUFFER_FRAG)
     return gpu.shader.create_from_info(info)
@@ -128,7 +148,20 @@ def build_resolve(gpu):
                             layers={"with_albedo": False, "with_element": True}, depth_write="ANY")
 
 
-BUILDERS = {TEXTURED: build, UNTEXTURED: lambda gpu: build(gpu, textured=False), RESOLVE: build_resolve}
+BUILDERS = {TEXTURED: build, UNTEXTURED: lambda gpu: build(gpu, textured=False),
+            TEXTURED + FACES: lambda gpu: build(gpu, faces=True),
+            UNTEXTURED + FACES: lambda gpu: build(gpu, textured=False, faces=True), RESOLVE: build_resolve}
+
+
+def draws_faces(snapshot) -> bool:
+    """Whether a frame of ``snapshot`` writes the face normals: when it may trace (not RASTER,
+    some element a candidate)."""
+    return str(snapshot.settings.mode).upper() != "RASTER" and any(e.is_candidate for e in snapshot.elements)
+
+
+def unused_shaders(faces: bool) -> tuple:
+    """The G-buffer variants a frame with or without face normals does not bind."""
+    return (TEXTURED, UNTEXTURED) if faces else (TEXTURED + FACES, UNTEXTURED + FACES)
 
 
 def view_proj(camera):
@@ -157,10 +190,12 @@ def draw(gpu, frame) -> bool:
         model = uniforms.model_relative(mesh.matrix_world, origin)
         visible.append((model, ~draw_chunks.boxes_outside(projection @ model, boxes)))
     drawn = culled = 0
+    faces = frame.faces
+    names = ("position", "normal", "albedo", "element") + (("geometric",) if faces else ())
     for layer in ("opaque", "transparent"):
         framebuffer = gpu.types.GPUFrameBuffer(
             depth_slot=targets["opaque_depth"],
-            color_slots=tuple(targets[f"{layer}_{name}"] for name in ("position", "normal", "albedo", "element")))
+            color_slots=tuple(targets[f"{layer}_{name}"] for name in names))
         with framebuffer.bind():
             gpu.state.viewport_set(0, 0, frame.width, frame.height)
             if layer == "opaque":
@@ -178,7 +213,7 @@ def draw(gpu, frame) -> bool:
                 for name, wanted in ((UNTEXTURED, in_layer & ~textured), (TEXTURED, in_layer & textured)):
                     if not any(wanted[material] for _, groups, _ in frame.draw_list for material, *_ in groups):
                         continue
-                    shader = frame.shaders[name]
+                    shader = frame.shaders[name + FACES if faces else name]
                     shader.bind()
                     shader.uniform_block("frame", ubo)
                     counts = draw_groups(frame, shader, visible, wanted)

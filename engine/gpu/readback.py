@@ -9,14 +9,14 @@ from ...phrt_addon.raster.gbuffer import GBuffer, GBufferLayer
 
 
 def read(gpu, framebuffer, slot, kind, channels, width, height, rect=None) -> np.ndarray:
-    """Colour attachment ``slot`` as (h, w, channels) float32 (``kind`` "FLOAT") or uint32
-    ("UINT"); (h, w) for one channel.  ``rect`` (x, y, w, h; row 0 at the bottom): only those
+    """Colour attachment ``slot`` as (h, w, channels) float32 (``kind`` "FLOAT"), uint32 ("UINT")
+    or uint8 ("UBYTE", an 8-bit target as stored); (h, w) for one channel.  ``rect`` (x, y, w, h; row 0 at the bottom): only those
     pixels, as an array of the rectangle's size."""
     x, y, w, h = (0, 0, width, height) if rect is None else rect
     buffer = gpu.types.Buffer(kind, w * h * channels)
     with framebuffer.bind():
         framebuffer.read_color(x, y, w, h, channels, slot, kind, data=buffer)
-    dtype = np.float32 if kind == "FLOAT" else np.uint32
+    dtype = {"FLOAT": np.float32, "UINT": np.uint32, "UBYTE": np.uint8}[kind]
     # The array keeps the buffer it views alive: no copy.
     return np.asarray(buffer, dtype=dtype).reshape((h, w, channels) if channels > 1 else (h, w))
 
@@ -34,20 +34,22 @@ def read_target(gpu, frame, name, kind="FLOAT", channels=4, rect=None) -> np.nda
     return whole
 
 
-def read_gbuffer(gpu, frame, transparent_drawn: bool, rect=None) -> GBuffer:
+def read_gbuffer(gpu, frame, transparent_drawn: bool, rect=None, faces: bool = False) -> GBuffer:
     """Both layers of ``frame`` (float32 positions relative to the camera); the transparent one
     empty when nothing transparent was drawn; with ``rect`` (x, y, w, h) only those pixels, the
-    others as cleared ones."""
+    others as cleared ones; ``faces``: the pass wrote the face normals (read as the layers'
+    ``geometric_normal``; without, the trace stage reconstructs them from the positions)."""
     targets, width, height = frame.targets, frame.width, frame.height
-    framebuffer = gpu.types.GPUFrameBuffer(color_slots=(
-        targets["opaque_position"], targets["opaque_normal"], targets["opaque_element"],
-        targets["transparent_position"], targets["transparent_normal"], targets["transparent_element"]))
 
-    def layer(first_slot):
-        position = read(gpu, framebuffer, first_slot, "FLOAT", 4, width, height, rect)
-        normal = read(gpu, framebuffer, first_slot + 1, "FLOAT", 4, width, height, rect)
-        element = read(gpu, framebuffer, first_slot + 2, "UINT", 1, width, height, rect)
-        decoded = decode_layer(position, normal, element)
+    def layer(name):
+        # One frame buffer a layer: the Python API binds at most 6 colour attachments.
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=tuple(
+            targets[f"{name}_{target}"] for target in ("position", "normal", "element", "geometric")[:4 if faces else 3]))
+        position = read(gpu, framebuffer, 0, "FLOAT", 4, width, height, rect)
+        normal = read(gpu, framebuffer, 1, "FLOAT", 4, width, height, rect)
+        element = read(gpu, framebuffer, 2, "UINT", 1, width, height, rect)
+        geometric = read(gpu, framebuffer, 3, "UBYTE", 4, width, height, rect) if faces else None
+        decoded = decode_layer(position, normal, element, geometric)
         if rect is None:
             return decoded
         # Decoded inside the rectangle only, then placed among cleared pixels (at 640x480 decoding
@@ -62,10 +64,11 @@ def read_gbuffer(gpu, frame, transparent_drawn: bool, rect=None) -> GBuffer:
         normal = placed(normal, 0.0)
         return GBufferLayer(covered=placed(decoded.covered, False), position=placed(position, 0.0)[..., :3],
                             normal=normal[..., :3], roughness=normal[..., 3], albedo=None, metallic=None,
-                            material=placed(decoded.material, -1), element=placed(decoded.element, -1))
+                            material=placed(decoded.material, -1), element=placed(decoded.element, -1),
+                            geometric_normal=None if geometric is None else placed(geometric, 0))
 
-    opaque = layer(0)
-    transparent = layer(3) if transparent_drawn else GBufferLayer.empty(width, height)
+    opaque = layer("opaque")
+    transparent = layer("transparent") if transparent_drawn else GBufferLayer.empty(width, height)
     return GBuffer(opaque=opaque, transparent=transparent, origin=frame.snapshot.camera.position,
                    view_depth=frame.view_depth)
 
@@ -82,12 +85,14 @@ def read_albedo(gpu, frame) -> tuple:
     return tuple(result)
 
 
-def decode_layer(position: np.ndarray, normal: np.ndarray, element: np.ndarray) -> GBufferLayer:
+def decode_layer(position: np.ndarray, normal: np.ndarray, element: np.ndarray,
+                 geometric: np.ndarray | None = None) -> GBufferLayer:
     """The raw read-back targets as a ``GBufferLayer`` (whole-array numpy; no albedo: only the
     reference lighting reads it, ``read_albedo``).  Cleared pixels read as zeros in every target.
     Position, normal and roughness are views of the read-back (h, w, 4) arrays, not copies: a
     pixel's row stays 16 bytes apart, so ``reshape(-1, 3)`` and the gathers of the pixels that get
-    rays need no copy of the whole layer (three full copies were 0.8 ms a layer at 320x240)."""
+    rays need no copy of the whole layer (three full copies were 0.8 ms a layer at 320x240).
+    ``geometric``: the face normals the G-buffer pass wrote, encoded (``encode_face_normals``)."""
     material = np.rint(position[..., 3]).astype(np.int64) - 1
     covered = material >= 0
     return GBufferLayer(
@@ -99,4 +104,5 @@ def decode_layer(position: np.ndarray, normal: np.ndarray, element: np.ndarray) 
         metallic=None,
         material=material.astype(np.int32),
         element=element.astype(np.int64) - 1,
+        geometric_normal=geometric,
     )

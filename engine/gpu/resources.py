@@ -247,6 +247,10 @@ class GPUResources:
         "opaque_element": "R32UI", "opaque_depth": "DEPTH_COMPONENT32F",
         "transparent_position": "RGBA32F", "transparent_normal": "RGBA32F", "transparent_albedo": "RGBA8",
         "transparent_element": "R32UI",
+        # The face normal where secondary rays leave from (phrt_addon/raster/gbuffer.py
+        # encode_face_normals): 8 bits a channel, a quarter of the read-back of RGBA32F, and an
+        # offset direction needs no more.
+        "opaque_geometric": "RGBA8", "transparent_geometric": "RGBA8",
         "transparent_mask": "DEPTH_COMPONENT32F",  # 0 where the transparent layer covers a pixel, else 1
         "normal_depth": "RGBA32F", "front_element": "R32UI",
         "opaque_light": "RGBA32F", "transparent_light": "RGBA32F", "combined": "RGBA32F",

@@ -33,8 +33,9 @@ class GBufferLayer:
     metallic: np.ndarray  # (h, w) float32
     material: np.ndarray  # (h, w) int32 material index, -1 where not covered
     element: np.ndarray  # (h, w) int32 element index, -1 where none
-    # (h, w, 3) float32 unit face (geometric) normal, when the raster pass provides it;
-    # otherwise ``geometric_normals`` reconstructs it from the positions.
+    # (h, w, 4) uint8 face (geometric) normal as the raster pass writes it when the frame may
+    # trace (``encode_face_normals``); otherwise ``geometric_normals`` reconstructs it from the
+    # positions.
     geometric_normal: np.ndarray | None = None
 
     @classmethod
@@ -68,7 +69,22 @@ class GBufferLayer:
                             normal=keep(self.normal, 0.0), roughness=keep(self.roughness, 0.0),
                             albedo=keep(self.albedo, 0.0), metallic=keep(self.metallic, 0.0),
                             material=keep(self.material, -1), element=keep(self.element, -1),
-                            geometric_normal=keep(self.geometric_normal, 0.0))
+                            geometric_normal=keep(self.geometric_normal, 0))
+
+
+def encode_face_normals(normals: np.ndarray) -> np.ndarray:
+    """(..., 3) face normals as the G-buffer pass stores them: (..., 4) uint8, each axis of the
+    unit normal as round((n + 1) * 127.5), alpha 255 where it was found (a finite, non-zero
+    vector) and 0 elsewhere (then (128, 128, 128)).  Decoded by ``normals.geometric_normals``.
+
+    Written on the GPU by engine/gpu/gbuffer.py GBUFFER_FRAG (its ``out_geometric``), whose twin
+    is ``GBufferLayer``."""
+    normals = np.asarray(normals, np.float64)
+    length = np.sqrt(np.sum(normals * normals, axis=-1, keepdims=True))
+    found = (length > 0) & np.all(np.isfinite(normals), axis=-1, keepdims=True) & np.isfinite(length)
+    unit = np.where(found, normals / np.where(found, length, 1.0), 0.0)
+    encoded = np.rint((unit + 1.0) * 127.5).astype(np.uint8)
+    return np.concatenate([encoded, np.where(found, 255, 0).astype(np.uint8)], axis=-1)
 
 
 # Pixels added around the projected bounds of a read-back rectangle: a traced pixel's neighbours

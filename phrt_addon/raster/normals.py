@@ -31,7 +31,8 @@ def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np
     normal, not the interpolated one, which on a coarse smooth mesh can point below the
     surface).
 
-    The layer's own ``geometric_normal`` when the raster pass wrote one; otherwise the cross
+    The layer's own ``geometric_normal`` when the raster pass wrote one (8 bits an axis: within
+    a degree of the face's); otherwise the cross
     product of the position differences to the neighbouring pixels of the same surface
     (same material and element), taking on each axis the side with the smaller difference
     (the one least likely to straddle an edge).  Where no such pair exists, or the result
@@ -43,8 +44,12 @@ def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np
     towards_camera = [-view[:, axis] for axis in range(3)]
     height, width = layer.covered.shape
     if layer.geometric_normal is not None:
-        normal = _columns(layer.geometric_normal, flat)
-        found = np.ones(len(flat), bool)
+        # As the pass stored it (``gbuffer.encode_face_normals``): decoded and made unit again.
+        rows = take_rows(layer.geometric_normal.reshape(-1, 4), flat).T
+        normal = [rows[axis] * (1.0 / 127.5) - 1.0 for axis in range(3)]
+        length = np.sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2])
+        found = (rows[3] >= 128) & (length > 0.5)
+        normal = [np.where(found, component / np.where(found, length, 1.0), 0.0) for component in normal]
     else:
         size = height * width
         covered = layer.covered.ravel()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from phrt.phrt_addon.frame_types import rows_of
-from phrt.phrt_addon.raster.gbuffer import GBufferLayer
+from phrt.phrt_addon.raster.gbuffer import GBufferLayer, encode_face_normals
 from phrt.phrt_addon.raster.normals import geometric_normals
 from phrt.phrt_addon.scene import shading
 from phrt.phrt_addon.trace.embree_scene import EPSILON_ULPS, FLOAT32_EPS, ray_epsilon
@@ -29,7 +29,9 @@ def _layer(rng, height=9, width=11, with_geometric=False):
                          material=material, roughness=np.zeros((height, width), np.float32),
                          albedo=np.ones((height, width, 3), np.float32), metallic=np.zeros((height, width), np.float32))
     if with_geometric:
-        layer.geometric_normal = rng.normal(size=(height, width, 3)).astype(np.float32)
+        faces = rng.normal(size=(height, width, 3))
+        faces[rng.random((height, width)) < 0.1] = 0.0  # degenerate: none found there
+        layer.geometric_normal = encode_face_normals(faces)
     return layer
 
 
@@ -42,8 +44,11 @@ def _reference_normals(layer, flat, view):
         y, x = divmod(int(p), width)
         towards = -np.asarray(view[k], np.float64)
         if layer.geometric_normal is not None:
-            normal = layer.geometric_normal.reshape(-1, 3)[p].astype(np.float64)
-            found = True
+            stored = layer.geometric_normal.reshape(-1, 4)[p]
+            normal = stored[:3].astype(np.float64) / 127.5 - 1.0
+            length = np.sqrt(normal @ normal)
+            found = bool(stored[3] >= 128) and length > 0.5
+            normal = normal / length if found else np.zeros(3)
         else:
             def same(q):
                 return bool(layer.covered.ravel()[q]) and layer.material.ravel()[q] == layer.material.ravel()[p] \
@@ -165,3 +170,32 @@ def test_layer_pixels_keep_each_pixels_face_normal_across_calls(seed):
     mask = rng.random(len(pixels)) < 0.5
     np.testing.assert_array_equal(pixels.geometric_normals(mask, view[mask]), want[mask])
     np.testing.assert_array_equal(pixels.geometric_normals(slice(None), view), want)
+
+
+def test_face_normals_stored_in_eight_bits_decode_within_a_degree():
+    """The G-buffer pass's encoding (``encode_face_normals``, GLSL twin in engine/gpu/gbuffer.py)
+    decodes to within a degree of the unit normal; zero, NaN and infinite vectors are marked
+    not found and leave towards the camera."""
+    rng = np.random.default_rng(7)
+    faces = rng.normal(size=(400, 3))
+    faces[:3] = [[0.0, 0.0, 0.0], [np.nan, 1.0, 0.0], [np.inf, 0.0, 0.0]]
+    faces[3:] *= 10.0 ** rng.uniform(-30, 30, size=(397, 1))  # any length
+    stored = encode_face_normals(faces)
+    assert stored.dtype == np.uint8 and stored.shape == (400, 4)
+    assert stored[:3, 3].tolist() == [0, 0, 0] and np.all(stored[3:, 3] == 255)
+    layer = _layer(np.random.default_rng(0), height=20, width=20)
+    layer.geometric_normal = np.zeros((20, 20, 4), np.uint8)
+    flat = np.random.default_rng(1).permutation(400)
+    layer.geometric_normal.reshape(-1, 4)[flat] = stored
+    layer.normal = np.zeros_like(layer.normal)
+    unit = faces[3:] / np.linalg.norm(faces[3:], axis=1, keepdims=True)
+    # The shading normal on the face's side, the camera on that side too: the face is kept.
+    layer.normal.reshape(-1, 3)[flat[3:]] = unit
+    view = np.zeros((400, 3))
+    view[:, 2] = 1.0
+    view[3:] = -unit
+    got = geometric_normals(layer, flat, view)
+    cosine = np.sum(got[3:] * unit, axis=1)
+    assert np.all(cosine > np.cos(np.radians(1.0)))
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_array_equal(got[:3], -view[:3])

@@ -456,5 +456,58 @@ def test_a_rectangle_of_the_layers_reads_back_as_the_same_pixels_of_the_whole():
         assert full.covered[inside].sum() > (0.5 * inside.sum() if name == "opaque" else 10)  # it holds surfaces
         assert full.covered[~inside].any()  # and there are some outside it to leave out
         assert not cut.covered[~inside].any() and (cut.element[~inside] == -1).all()
-        for field in ("covered", "position", "normal", "roughness", "material", "element"):
+        assert full.geometric_normal is not None  # the showcase's frames may trace: face normals too
+        for field in ("covered", "position", "normal", "roughness", "material", "element", "geometric_normal"):
             np.testing.assert_array_equal(getattr(cut, field), getattr(expected, field), err_msg=f"{name}.{field}")
+
+
+def test_the_gbuffers_face_normals_are_the_triangles_that_embree_hits():
+    """A frame that may trace writes each pixel's face normal (``GBUFFER_FRAG``'s screen
+    derivatives of the position, 8 bits an axis): camera rays through the covered pixels of both
+    layers hit, in Embree, triangles whose normal is within 2 degrees of it (the numpy
+    reconstruction from neighbouring positions is off by more wherever it straddles an edge of a
+    curved surface); a RASTER frame writes none."""
+    from phrt.phrt_addon.trace.embree_scene import TraceScene
+    scene = lit_scene()
+
+    def job(engine, depsgraph):
+        snapshot = extract.extract(depsgraph)
+        frames = {}
+        for mode in ("HYBRID", "RASTER"):
+            snapshot.settings.mode = mode
+            frame = GPUFrame(snapshot)
+            frame.draw()
+            frames[mode] = (frame.faces, frame.gbuffer())
+        return snapshot, frames
+
+    snapshot, frames = run_on_gpu(scene, job)
+    faces, gbuffer = frames["HYBRID"]
+    assert faces and not frames["RASTER"][0]
+    assert frames["RASTER"][1].opaque.geometric_normal is None
+    trace_scene = TraceScene(threads=1)
+    try:
+        trace_scene.update(snapshot)
+        for name in ("opaque", "transparent"):
+            layer = getattr(gbuffer, name)
+            assert layer.geometric_normal.dtype == np.uint8 and layer.geometric_normal.shape == (HEIGHT, WIDTH, 4)
+            # Opaque pixels behind the transparent layer: the camera ray hits the glass first.
+            seen = layer.covered if name == "transparent" else layer.covered & ~gbuffer.transparent.covered
+            flat = np.flatnonzero(seen.ravel())
+            assert len(flat) > (5000 if name == "opaque" else 100)
+            position = layer.position.reshape(-1, 3)[flat].astype(np.float64)
+            distance = np.linalg.norm(position, axis=1)
+            origins = np.broadcast_to(trace_scene.to_trace(np.asarray(snapshot.camera.position)[None, :]),
+                                      position.shape).copy()
+            hits = trace_scene.intersect(origins, position / distance[:, None])
+            at_depth = np.abs(hits["t"] - distance) < 1e-3 * distance
+            assert at_depth.mean() > 0.98
+            embree = hits["Ng"].astype(np.float64)[at_depth]
+            embree /= np.linalg.norm(embree, axis=1, keepdims=True)
+            stored = layer.geometric_normal.reshape(-1, 4)[flat][at_depth]
+            assert np.all(stored[:, 3] == 255)
+            decoded = stored[:, :3] / 127.5 - 1.0
+            decoded /= np.linalg.norm(decoded, axis=1, keepdims=True)
+            cosine = np.abs(np.sum(decoded * embree, axis=1))
+            assert np.mean(cosine > np.cos(np.radians(2.0))) > 0.99, name
+    finally:
+        trace_scene.close()
