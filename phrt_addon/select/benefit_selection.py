@@ -19,7 +19,8 @@ Exploration
     An item never measured gains a bonus that grows with the frames it waited, visible:
     after ``EXPLORE_FRAMES`` such frames it is worth more than every other item together, so
     it is traced as soon as it fits the time the items kept from last frame leave.  The bonus
-    competes with this frame's adds only: a guess never evicts a traced item (a pop each).
+    competes with this frame's adds only: a guess never evicts a traced item (a pop each).  At
+    most ``EXPLORE_MAX`` such items compete in one frame (the longest waiting).
 Switching cost
     Changing an item's state pops its pixels by about its own value (what tracing changes
     there), so dropping a selected item costs ``SWITCH`` times its value and adding one costs
@@ -65,15 +66,15 @@ from . import knapsack
 from .flip_guard import FLIP_GAP, FlipGuard  # noqa: F401
 from .frame_time import (AIM_OVER, AIM_RANGE, AIM_SHARE, AIM_STEP, MARGIN_FRAMES, STEADY_FRAMES,  # noqa: F401
                          STEADY_QUANTILE, FrameTime, MeasureCost)
+from .exploration import exploration_bonus
 from .item_choice import ItemChoice
 from .prior_scale import PriorScale
 from ..finite import finite
 from ..schema import EFFECTS
 
 SWITCH = 0.25
-# An item not traced last frame is charged this share more than its predicted ms, on top of being
-# sized for the steady time left (0.25 until 6 Dec 2026: with it tight budgets added nothing; the
-# training A/B that set 0: docs/selection.md, "Adds without slack").
+# An item not traced last frame is charged this share more than predicted, besides fitting the steady
+# time left (0.25 until 6 Dec 2026; docs/selection.md, "Adds without slack").
 ADD_SLACK = 0.0
 # An item traced last frame is charged this share less (it keeps its place through the time
 # left's noise); an item dropped while it competed waits REST frames before it is added again.
@@ -82,10 +83,12 @@ REST = 4
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
-# Quality tiers (issue 23): the rates an item may be traced at, the share of its full-rate
-# benefit each keeps and the share of its full-rate cost each takes: priors (from the
-# reconstruction's measurements, tests/core/test_trace_rates.py), replaced per effect and rate by
-# what is measured (BenefitSelector.keep; item_costs.ItemCosts.tier_costs).
+# At most this many never-measured items get the bonus in one frame (exploration.py): a bound on
+# work (sample scenes have at most 48 items; 1,000 candidates gave hundreds, 9.5 ms a frame).
+EXPLORE_MAX = 64
+# Quality tiers (issue 23): the rates an item may be traced at, the share of its full-rate benefit
+# each keeps and of its cost each takes: priors (tests/core/test_trace_rates.py), replaced per
+# effect and rate by what is measured (BenefitSelector.keep; item_costs.ItemCosts.tier_costs).
 TIER_RATES = (1.0, 0.5, 0.25)
 TIER_KEEP = {1.0: 1.0, 0.5: 0.85, 0.25: 0.65}
 TIER_COST = {1.0: 1.0, 0.5: 0.9, 0.25: 0.7}
@@ -97,8 +100,7 @@ KEEP_RANGE = (0.25, 1.0)  # a share learned near 0 would never be tried again
 # cost (frame_time.MeasureCost); MEASURE_STALE frames after it in any case.
 MEASURE_EVERY = 2
 MEASURE_STALE = 8
-# The material priors are recomputed (the layers read before the selection) every PRIOR_EVERY
-# frames, and on any frame with a visible candidate that has none yet.
+# The material priors are recomputed every PRIOR_EVERY frames, and when a visible candidate has none.
 PRIOR_EVERY = 8
 MAX_VALUE = 1e15
 NO_ROOM = 1e12  # the add factor when the recent frames left no time at all
@@ -193,8 +195,7 @@ class BenefitSelector:
         # added (a finite factor, so a 0 ms cost stays a number).
         peak = available / steady if 0.0 < steady < available else (1.0 if steady > 0.0 else NO_ROOM)
         add_factor = (1.0 + ADD_SLACK) * peak
-        fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else \
-            np.clip(finite(fixed_ms, nan=np.inf), 0.0, np.inf)
+        fixed = np.zeros(len(EFFECTS)) if fixed_ms is None else np.clip(finite(fixed_ms, nan=np.inf), 0.0, np.inf)
         if unmeasured is not None:  # an effect's first frame traces one probe item (its cost is a guess)
             for j in np.flatnonzero(np.asarray(unmeasured, bool) & eligible.any(axis=0)):
                 fits = eligible[:, j] & (cost[:, j] + fixed[j] <= capacity)
@@ -242,10 +243,9 @@ class BenefitSelector:
         room = capacity - float(np.sum(kept_cost[kept])) - float(np.sum(charged_fixed[paid]))
         explore = may_add & ~kept & fresh & (cost * add_factor <= room)
         if np.any(explore):
-            bonus = np.zeros(eligible.shape)
-            total = float(switched[eligible].sum()) + 1e-12
             waited = np.fromiter(map(self.waited.get, compress(keys, explore.ravel().tolist()), repeat(0)), np.float64)
-            bonus[explore] = total * np.minimum((waited + 1) / EXPLORE_FRAMES, 1.0)
+            bonus = exploration_bonus(explore, waited, switched, cost, float(switched[eligible].sum()) + 1e-12,
+                                      EXPLORE_FRAMES, EXPLORE_MAX)
             added = fill(may_add & ~kept, bonus, room, np.where(paid, 0.0, charged_fixed))
             rate = np.where(kept, rate, added)
         chosen = rate > 0
