@@ -49,7 +49,8 @@ def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np
         normal = [rows[axis] * (1.0 / 127.5) - 1.0 for axis in range(3)]
         length = np.sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2])
         found = (rows[3] >= 128) & (length > 0.5)
-        normal = [np.where(found, component / np.where(found, length, 1.0), 0.0) for component in normal]
+        inverse = np.divide(1.0, length, out=np.zeros(len(flat)), where=found)  # 0 where none: a zero normal
+        normal = [component * inverse for component in normal]
     else:
         size = height * width
         covered = layer.covered.ravel()
@@ -89,12 +90,15 @@ def geometric_normals(layer: GBufferLayer, flat: np.ndarray, view_directions: np
         shading_normal[2] * towards_camera[2]
     # The two normals agree once each faces the camera: the sign of their dot product, flipped
     # once for each that was turned.
-    agree = (normal[0] * shading_normal[0] + normal[1] * shading_normal[1] + normal[2] * shading_normal[2]) * \
-        np.where((side < 0) != (shading_side < 0), -1.0, 1.0)
+    product = normal[0] * shading_normal[0] + normal[1] * shading_normal[1] + normal[2] * shading_normal[2]
+    agree = np.where((side < 0) != (shading_side < 0), product < 0, product > 0)
     finite = np.isfinite(normal[0]) & np.isfinite(normal[1]) & np.isfinite(normal[2])
-    usable = found & (np.abs(side) > 1e-6) & (agree > 0) & finite
+    usable = found & (np.abs(side) > 1e-6) & agree & finite
     flip = np.where(side < 0, -1.0, 1.0)
-    result = np.empty((len(flat), 3))
-    for axis in range(3):
-        result[:, axis] = np.where(usable, normal[axis] * flip, towards_camera[axis])
+    # Built whole, then the few unusable rows replaced: writing three strided columns through
+    # np.where took a third of the function (36,000 pixels: 1.0 of 3.4 ms).
+    result = np.stack([normal[0] * flip, normal[1] * flip, normal[2] * flip], axis=1)
+    unusable = np.flatnonzero(~usable)
+    if len(unusable):
+        result[unusable] = -view[unusable]
     return result

@@ -78,6 +78,15 @@ ANCHOR_BASE = 2.0
 # effect of each traced frame (0.4 ms a frame on atrium).  The first FIT_EVERY samples are each fitted.
 FIT_EVERY = 4
 SURPRISE = 0.25
+# Embree's ms a ray is taken from a window's largest batch only when it holds this many rays at
+# least (or from the slope between batches SPREAD apart): on fewer its per-call work weighs on each
+# ray (atrium path1: 160 rays of one small caster 0.8 us a ray inside Embree, 1,000 rays 0.4, a
+# 36,000-ray batch 0.19).  From a smaller batch it is an upper bound: the effect's last trusted
+# figure caps it, and without one the line it gives is not extrapolated beyond the largest item
+# measured (grows as rays ** MIN_EXPONENT there).  Before: after a stale revision cleared atrium
+# path2's shadow window, one 4-ray frame priced the 30,000-ray young tree at 78-412 ms (the oracle
+# measured 17-19), which was then never traced again for 90 frames.
+TRUSTED_RAYS = 1000
 RATIO_SMOOTHING = 0.3
 RATIO_RANGE = (1e-3, 1e3)
 MAX_MS = 1e12
@@ -94,6 +103,7 @@ class ItemCosts:
         self.learned: set[str] = set()  # the effects measured at least once in this replay
         self.ratio: dict[tuple[str, str], float] = {}
         self._fit = {effect: _prior(effect) for effect in EFFECTS}
+        self.embree_known = np.full(len(EFFECTS), np.nan)  # each effect's last trusted Embree ms a ray
         self._since_fit = {effect: 0 for effect in EFFECTS}  # samples added since the last fit
         self._pooled = np.ones(len(EFFECTS))
         self.reconstruction = {effect: deque(maxlen=WINDOW) for effect in EFFECTS}  # ms per pixel
@@ -132,6 +142,7 @@ class ItemCosts:
                 fixed, scale, exponent, embree, largest = self._fit[effect]
                 self._fit[effect] = (fixed / STALE_DISCOUNT, scale / STALE_DISCOUNT, exponent,
                                      embree / STALE_DISCOUNT, largest)
+                self.embree_known[j] /= STALE_DISCOUNT
                 self.samples[effect].clear()
                 self.anchors[effect].clear()
             self.stale_after[j] = min(2 * self.stale_after[j], STALE_MAX_FRAMES)
@@ -218,7 +229,12 @@ class ItemCosts:
             self._since_fit[effect] += 1
             if len(self.samples[effect]) <= FIT_EVERY or self._since_fit[effect] >= FIT_EVERY or new_range or \
                     not abs(ms - predicted) <= SURPRISE * predicted:
-                self._fit[effect] = _fit(self._window(effect), effect == "shadows")
+                window = self._window(effect)
+                known = self.embree_known[j]
+                self._fit[effect] = _fit(window, effect == "shadows", None if np.isnan(known) else float(known))
+                trusted = _embree_ms_a_ray(*np.asarray(window, np.float64).T[[0, 3]])
+                if trusted[1]:
+                    self.embree_known[j] = trusted[0]
                 self._since_fit[effect] = 0
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
@@ -256,28 +272,40 @@ def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     return i, j
 
 
-def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]:
+def _embree_ms_a_ray(rays, inside) -> tuple[float, bool]:
+    """(Embree's own ms a ray, whether it is trusted) from a window's batches (``rays``, ``inside``
+    their ms inside Embree): the slope of its time against the rays over pairs of batches SPREAD
+    apart (its per-call overhead is no ray's), else its largest batch's ms a ray, trusted from
+    TRUSTED_RAYS rays."""
+    i, j = _pairs(len(rays))
+    apart = np.maximum(rays[i], rays[j]) >= SPREAD * np.minimum(rays[i], rays[j])
+    largest = int(np.argmax(rays))
+    embree = float(inside[largest] / rays[largest])
+    trusted = bool(rays[largest] >= TRUSTED_RAYS)
+    if np.any(apart):
+        first, second = i[apart], j[apart]
+        slope = median((inside[second] - inside[first]) / (rays[second] - rays[first]))
+        if slope > 0:
+            embree, trusted = min(slope, embree), True
+    return embree, trusted
+
+
+def _fit(samples, timed_setup: bool, known_embree: float | None = None) -> tuple[float, float, float, float, float]:
     """(fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
     (rays, ms, setup ms, Embree ms, items): an item of r rays costs max(scale x r ** exponent,
     Embree's ms a ray x r), growing as r ** MIN_EXPONENT beyond the largest item measured.  The
     timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
-    casters is not counted twice)."""
+    casters is not counted twice).  ``known_embree``: the effect's last trusted Embree ms a ray,
+    which caps an untrusted one (``TRUSTED_RAYS``)."""
     data = np.asarray(samples, np.float64)
     rays, ms, setup, inside, items = data.T
     setup = setup if timed_setup else np.zeros_like(setup)
     rest = np.maximum(ms - setup, 0.0)
     items = np.maximum(items, 1.0)
     i, j = _pairs(len(data))
-    # Embree's own ms a ray: the slope of its time against the rays over pairs of frames SPREAD
-    # apart (its per-call overhead is no ray's: 160 rays of one small caster took 0.8 us a ray
-    # inside Embree, 1,000 rays 0.4, a 36,000-ray batch 0.19), else on the window's largest batch.
-    apart = np.maximum(rays[i], rays[j]) >= SPREAD * np.minimum(rays[i], rays[j])
-    largest = int(np.argmax(rays))
-    embree = float(inside[largest] / rays[largest])
-    if np.any(apart):
-        first, second = i[apart], j[apart]
-        slope = median((inside[second] - inside[first]) / (rays[second] - rays[first]))
-        embree = min(slope, embree) if slope > 0 else embree
+    embree, trusted = _embree_ms_a_ray(rays, inside)
+    if not trusted and known_embree is not None:
+        embree, trusted = min(embree, known_embree), True
     # An item's time against its rays, per item of each frame (a frame of two casters is two
     # items of half its rays each): a power law through the pairs of frames SPREAD apart.
     x, y = rays / items, rest / items
@@ -289,12 +317,15 @@ def _fit(samples, timed_setup: bool) -> tuple[float, float, float, float, float]
         scale = median(y[usable] / x[usable] ** exponent)
         return median(setup), scale, exponent, embree, float(np.max(x[usable]))
     # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
-    # fixed part paid once (its intercept).
+    # fixed part paid once (its intercept); from an untrusted Embree figure, not beyond the largest
+    # item measured.
     per_ray = EMBREE_FACTOR * embree
     intercept = float(np.clip(median(rest - per_ray * rays), 0.0, float(rest.min())))
     if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
         per_ray = median(np.maximum(rest - intercept, 0.0) / rays)
-    return median(setup) + intercept, per_ray, 1.0, embree, np.inf
+    if trusted or not np.any(usable):
+        return median(setup) + intercept, per_ray, 1.0, embree, np.inf
+    return median(setup) + intercept, per_ray, 1.0, 0.0, float(np.max(x[usable]))  # no floor from it
 
 
 def _prior(effect) -> tuple[float, float, float, float, float]:

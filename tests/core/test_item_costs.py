@@ -257,3 +257,53 @@ def test_an_item_beyond_the_largest_measured_is_fitted_at_once():
     assert costs._fit["shadows"][4] == pytest.approx(840)
     power_frame(costs, [1000])  # log2 1000 and 840: both octave 9; the same law
     assert costs._fit["shadows"][4] == pytest.approx(1000)
+
+
+def _tiny_frame(costs, rays, ms=3.5, setup=2.5, embree_ms=0.05):
+    """A traced frame of one small caster: ``rays`` rays, Embree's time mostly its per-call work."""
+    names = ["Small", "Tree"]
+    expected = np.array([[rays, 0, 0], [30000, 0, 0]], float)
+    chosen = np.array([[True, False, False], [False, False, False]])
+    costs.observe(names, expected, expected * chosen, chosen, chosen.astype(float), [ms, 0, 0], [rays, 0, 0],
+                  shadow_setup_ms=setup, embree_ms=[embree_ms, 0, 0])
+
+
+def test_a_tiny_batch_after_a_revision_does_not_price_a_large_caster_by_embrees_per_call_time():
+    """Shadows learned on 5,000-ray frames (0.2 us a ray inside Embree), then idle until the stale
+    revision cleared the window; the next frame traces a 4-ray caster whose Embree call took 0.05
+    ms (12.5 us a ray: per-call work).  The 30,000-ray tree is priced with the last trusted Embree
+    figure (halved by the revision), not 60x dearer (atrium path2: 78-412 ms against the oracle's
+    17-19, never traced again for 90 frames)."""
+    costs = ItemCosts()
+    for _ in range(6):
+        shadows_frame(costs, 5000, 0, chosen_large=False, ms_per_ray=6e-4, fixed=5.0, embree=2e-4)
+    assert costs.embree_known[0] == pytest.approx(2e-4)
+    for _ in range(item_costs.STALE_FRAMES):
+        costs.tick([True, False, False], [False, False, False])
+    assert costs.embree_known[0] == pytest.approx(2e-4 / item_costs.STALE_DISCOUNT)
+    _tiny_frame(costs, 4)
+    tree = costs.predict(["Small", "Tree"], np.array([[4, 0, 0], [30000, 0, 0]], float), [1.0, 1.0])[1, 0]
+    rays = 30000 * costs.ratios(["Tree"])[0, 0]  # the effect's median rays ratio
+    assert tree == pytest.approx(rays * item_costs.EMBREE_FACTOR * 1e-4, rel=1e-6)
+    # The slope between two batches SPREAD apart is trusted again, per-call work out.
+    _tiny_frame(costs, 143, embree_ms=0.05 + 139 * 2e-4)
+    assert costs._fit["shadows"][3] == pytest.approx(2e-4, rel=1e-6)
+
+
+def test_a_line_from_tiny_batches_alone_is_not_extrapolated_beyond_them():
+    """The replay's first shadow frames trace 4- and 5-ray casters only (Embree's time all per-call
+    work, nothing trusted yet): beyond the largest item measured the line grows as rays **
+    MIN_EXPONENT, with no Embree floor from those figures, so a 30,000-ray caster is tried (its
+    first frame corrects the fit) instead of being priced at seconds."""
+    costs = ItemCosts()
+    _tiny_frame(costs, 4)
+    _tiny_frame(costs, 5)
+    fixed, per_ray, exponent, embree, largest = costs._fit["shadows"]
+    assert exponent == 1.0 and embree == 0.0 and largest == pytest.approx(5.0)
+    assert np.isnan(costs.embree_known[0])
+    rays = 30000 * costs.ratios(["Tree"])[0, 0]
+    tree = costs.predict(["Tree"], np.array([[30000.0, 0, 0]]), [1.0])[0, 0]
+    assert tree == pytest.approx(per_ray * 5 * (rays / 5) ** item_costs.MIN_EXPONENT, rel=1e-6)
+    assert tree < 0.05 * per_ray * rays
+    # Within what was measured, the line.
+    assert costs.predict(["Small"], np.array([[4.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(4 * per_ray)
