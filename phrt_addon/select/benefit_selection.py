@@ -66,7 +66,7 @@ from . import knapsack
 from .flip_guard import FLIP_GAP, FlipGuard  # noqa: F401
 from .frame_time import (AIM_OVER, AIM_RANGE, AIM_SHARE, AIM_STEP, MARGIN_FRAMES, STEADY_FRAMES,  # noqa: F401
                          STEADY_QUANTILE, FrameTime, MeasureCost)
-from .exploration import exploration_bonus
+from .exploration import exploration
 from .item_choice import ItemChoice
 from .prior_scale import PriorScale
 from ..finite import finite
@@ -83,8 +83,9 @@ REST = 4
 DECAY = 0.05
 SMOOTHING = 0.3
 EXPLORE_FRAMES = 8
-# At most this many never-measured items get the bonus in one frame (exploration.py): a bound on
-# work (sample scenes have at most 48 items; 1,000 candidates gave hundreds, 9.5 ms a frame).
+# At most this many never-measured items get the bonus in one frame, and beyond this many items the
+# exploration's knapsack holds only those and the first one's adds (exploration.py): a bound on its
+# work (sample scenes have at most 48 items; at 1,000 candidates it took 9.5-11 ms a frame).
 EXPLORE_MAX = 64
 # Quality tiers (issue 23): the rates an item may be traced at, the share of its full-rate benefit
 # each keeps and of its cost each takes: priors (tests/core/test_trace_rates.py), replaced per
@@ -232,9 +233,8 @@ class BenefitSelector:
             return flat.reshape(allowed.shape)
 
         rate = fill(may_add, np.zeros(eligible.shape), capacity, charged_fixed)
-        # Exploration competes only for the time the items kept from last frame leave: a never
-        # measured item may displace this frame's adds, never a traced item (on arcade path1 at 0.75
-        # one glass ball's first trace evicted seven traced elements at once: seven pops).
+        # Exploration competes only for the time the items kept from last frame leave: a guess may
+        # displace this frame's adds, never a traced item (arcade path1 at 0.75: seven pops at once).
         kept = (rate > 0) & was
         option = np.searchsorted(-np.asarray(TIER_RATES), -rate)  # each kept item's tier (full: 0)
         kept_cost = np.take_along_axis(tier_costs, np.minimum(option, len(TIER_RATES) - 1)[:, :, None],
@@ -244,9 +244,9 @@ class BenefitSelector:
         explore = may_add & ~kept & fresh & (cost * add_factor <= room)
         if np.any(explore):
             waited = np.fromiter(map(self.waited.get, compress(keys, explore.ravel().tolist()), repeat(0)), np.float64)
-            bonus = exploration_bonus(explore, waited, switched, cost, float(switched[eligible].sum()) + 1e-12,
-                                      EXPLORE_FRAMES, EXPLORE_MAX)
-            added = fill(may_add & ~kept, bonus, room, np.where(paid, 0.0, charged_fixed))
+            allowed, bonus = exploration(explore, may_add & ~kept, None if tiers else rate > 0, waited, switched, cost,
+                                         float(switched[eligible].sum()) + 1e-12, EXPLORE_FRAMES, EXPLORE_MAX)
+            added = fill(allowed, bonus, room, np.where(paid, 0.0, charged_fixed))
             rate = np.where(kept, rate, added)
         chosen = rate > 0
         spent = np.zeros(eligible.shape)

@@ -5,7 +5,7 @@ import numpy as np
 
 from phrt.phrt_addon.select import benefit_selection
 from phrt.phrt_addon.select.benefit_selection import BenefitSelector
-from phrt.phrt_addon.select.exploration import exploration_bonus
+from phrt.phrt_addon.select.exploration import exploration
 
 
 def _instance(rng, n=40):
@@ -19,7 +19,10 @@ def _instance(rng, n=40):
 def test_within_the_bound_every_fitting_item_gets_its_bonus():
     rng = np.random.default_rng(0)
     explore, waited, value, cost = _instance(rng)
-    bonus = exploration_bonus(explore, waited, value, cost, 100.0, 8, int(explore.sum()))
+    allowed = explore | (rng.random(explore.shape) < 0.2)
+    added = allowed & ~explore & (rng.random(explore.shape) < 0.5)
+    got, bonus = exploration(explore, allowed, added, waited, value, cost, 100.0, 8, int(allowed.sum()))
+    np.testing.assert_array_equal(got, allowed)  # as many items as the bound: all of them
     np.testing.assert_allclose(bonus[explore], 100.0 * np.minimum((waited + 1) / 8, 1.0))
     assert not bonus[~explore].any()
 
@@ -29,9 +32,13 @@ def test_beyond_the_bound_the_longest_waiting_then_the_most_valuable_per_ms_comp
     for _ in range(20):
         explore, waited, value, cost = _instance(rng)
         most = int(rng.integers(1, explore.sum()))
-        bonus = exploration_bonus(explore, waited, value, cost, 100.0, 8, most)
+        allowed = explore | (rng.random(explore.shape) < 0.2)
+        added = allowed & ~explore & (rng.random(explore.shape) < 0.5)
+        got, bonus = exploration(explore, allowed, added, waited, value, cost, 100.0, 8, most)
         chosen = bonus > 0
         assert chosen.sum() == most and not (chosen & ~explore).any()
+        # More items than the bound: the knapsack holds the bonus items and the first one's adds.
+        np.testing.assert_array_equal(got, allowed & (chosen | added))
         flat = np.flatnonzero(explore.ravel())
         picked = chosen.ravel()[flat]
         ratio = value.ravel()[flat] / cost.ravel()[flat]
