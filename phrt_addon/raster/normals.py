@@ -1,7 +1,8 @@
 """Face normals of G-buffer pixels: where secondary rays leave from.
 
-Per pixel from the layer's positions (the GPU G-buffer writes shading normals only), component
-by component in float64: a frame's shadow pixels are tens of thousands, and numpy's (n, 3)
+Decoded from the layer's own face normals when the G-buffer pass wrote them (a frame that may
+trace: ``engine/gpu/gbuffer.py``), else per pixel from the layer's positions; component by
+component in float64: a frame's shadow pixels are tens of thousands, and numpy's (n, 3)
 fancy indexing, masks and broadcasts cost several times its 1-D arithmetic (35k pixels at
 320x240: 15 -> 7 ms).
 """

@@ -241,7 +241,7 @@ class BenefitSelector:
                                        axis=2)[:, :, 0] if tiers else charged  # tiers: at most their cost
         paid = kept.any(axis=0)
         room = capacity - float(np.sum(kept_cost[kept])) - float(np.sum(charged_fixed[paid]))
-        explore = may_add & ~kept & fresh & (cost * add_factor <= room)
+        explore = may_add & ~kept & fresh & (cost * add_factor + np.where(paid, 0.0, charged_fixed) <= room)
         if np.any(explore):
             waited = np.fromiter(map(self.waited.get, compress(keys, explore.ravel().tolist()), repeat(0)), np.float64)
             allowed, bonus = exploration(explore, may_add & ~kept, None if tiers else rate > 0, waited, switched, cost,

@@ -70,3 +70,26 @@ def test_a_bound_below_the_never_measured_items_starves_none(monkeypatch):
         measured = np.where(choice.chosen, pixels * 0.01, 0.0)
         selector.observe(names, choice, priors, measured, pixels)
     assert sorted(first_traced) == names and max(first_traced.values()) <= 3, first_traced
+
+
+def test_items_whose_effects_fixed_part_does_not_fit_do_not_hold_the_bonus_places(monkeypatch):
+    """Two never-measured shadow items of 3 ms whose effect's fixed part (4 ms) no kept item pays
+    cannot fit the 5 ms left; with room for only two bonus places they must not hold them (they
+    would, waiting ever longer, for good): the two 1 ms reflections are traced."""
+    monkeypatch.setattr(benefit_selection, "EXPLORE_MAX", 2)
+    selector = BenefitSelector()
+    names = [f"I{i}" for i in range(4)]
+    pixels = np.zeros((4, 3))
+    pixels[:2, 0] = pixels[2:, 1] = 100.0
+    eligible = pixels > 0
+    priors = np.zeros((4, 3))
+    cost = np.zeros((4, 3))
+    cost[:2, 0], cost[2:, 1] = 3.0, 1.0
+    traced = set()
+    for _ in range(12):
+        selector.observe_time(5.0, 5.0)
+        choice = selector.choose(names, eligible, pixels, priors, np.ones(4), cost, 5.0, 0.0,
+                                 fixed_ms=np.array([4.0, 0.0, 0.0]))
+        traced |= {(int(i), int(j)) for i, j in zip(*np.nonzero(choice.chosen))}
+        selector.observe(names, choice, priors, np.where(choice.chosen, pixels * 0.01, 0.0), pixels)
+    assert traced == {(2, 1), (3, 1)}
