@@ -103,8 +103,7 @@ MEASURE_EVERY = 2
 MEASURE_STALE = 8
 # The material priors are recomputed every PRIOR_EVERY frames, and when a visible candidate has none.
 PRIOR_EVERY = 8
-MAX_VALUE = 1e15
-NO_ROOM = 1e12  # the add factor when the recent frames left no time at all
+MAX_VALUE, NO_ROOM = 1e15, 1e12  # NO_ROOM: the add factor when the recent frames left no time at all
 
 
 def _item_keys(names) -> list:
@@ -241,11 +240,12 @@ class BenefitSelector:
                                        axis=2)[:, :, 0] if tiers else charged  # tiers: at most their cost
         paid = kept.any(axis=0)
         room = capacity - float(np.sum(kept_cost[kept])) - float(np.sum(charged_fixed[paid]))
-        explore = may_add & ~kept & fresh & (cost * add_factor + np.where(paid, 0.0, charged_fixed) <= room)
+        explore = may_add & ~kept & fresh & (cost * add_factor <= room)
         if np.any(explore):
             waited = np.fromiter(map(self.waited.get, compress(keys, explore.ravel().tolist()), repeat(0)), np.float64)
             allowed, bonus = exploration(explore, may_add & ~kept, None if tiers else rate > 0, waited, switched, cost,
-                                         float(switched[eligible].sum()) + 1e-12, EXPLORE_FRAMES, EXPLORE_MAX)
+                                         float(switched[eligible].sum()) + 1e-12, EXPLORE_FRAMES, EXPLORE_MAX,
+                                         cost * add_factor + np.where(paid, 0.0, charged_fixed) <= room)
             added = fill(allowed, bonus, room, np.where(paid, 0.0, charged_fixed))
             rate = np.where(kept, rate, added)
         chosen = rate > 0

@@ -13,7 +13,7 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   price after the window has moved on), each frame's rays and ms divided among its items,
   over the pairs of frames whose rays an item are ``SPREAD`` apart (``MIN_PAIRS`` of them at
   least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
-  against the rays) once that figure is trusted (``TRUSTED_RAYS``); beyond the largest item of the window, growing as rays ** ``MIN_EXPONENT``
+  against the rays; ``TRUSTED_RAYS``); beyond the largest item of the window, growing as rays ** ``MIN_EXPONENT``
   (an optimistic price: a fit on small items extrapolated at its own exponent priced atrium's oak,
   never traced, at 40 ms against the oracle's 22-32, so it was never tried).  Before such a
   spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
@@ -315,7 +315,7 @@ def _fit(samples, timed_setup: bool, known_embree: float | None = None) -> tuple
         first, second = i[apart], j[apart]
         exponent = min(max(median(np.log(y[second] / y[first]) / np.log(x[second] / x[first])), MIN_EXPONENT), 1.0)
         scale = median(y[usable] / x[usable] ** exponent)
-        return median(setup), scale, exponent, embree if trusted else 0.0, float(np.max(x[usable]))
+        return median(setup), scale, exponent, embree, float(np.max(x[usable]))
     # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
     # fixed part paid once (its intercept); from an untrusted Embree figure, not beyond the largest
     # item measured.

@@ -308,11 +308,3 @@ def test_a_line_from_tiny_batches_alone_is_not_extrapolated_beyond_them():
     # Within what was measured, the line.
     assert costs.predict(["Small"], np.array([[4.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(4 * per_ray)
 
-
-def test_an_untrusted_embree_figure_sets_no_floor_under_the_power_law_either():
-    """Ten-ray frames over one, two and four items: the power law is fitted (items' rays spread)
-    but the batches never reach TRUSTED_RAYS and never spread: Embree's 5 us a ray (its per-call
-    time) must not floor a 30,000-ray caster at 150 ms."""
-    fit = item_costs._fit([(10, 3.5, 2.5, 0.05, k) for k in (1, 2, 4)], True)
-    assert fit[3] == 0.0
-    assert item_costs._item_ms(fit, np.array([30000.0]))[0] < 30000 * 0.005
