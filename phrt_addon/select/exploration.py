@@ -14,16 +14,19 @@ def exploration(explore: np.ndarray, allowed: np.ndarray, added: np.ndarray | No
     ``explore`` (bool) the never-measured items that fit the time the kept items leave;
     ``allowed`` (bool) the items this frame may add; ``added`` (bool) those the first knapsack
     added (None: the knapsack holds every allowed item; quality tiers' multiple-choice knapsack
-    is exact on fewer items, and slower); ``waited`` the frames each ``explore`` item waited (in its flat order); ``value`` and
-    ``cost`` every item's (switched) value and predicted ms.  An item's bonus is ``total`` x
-    min((waited + 1) / ``frames``, 1): after ``frames`` frames it outweighs every other item
-    together.  At most ``most`` items get it: those that fit with their effect's unpaid fixed
-    part (``fits``, bool, all items) first, then those that waited longest, then the most valuable
-    per ms; the others compete by their value alone.  Items that cannot fit cannot hold the places
-    (they would, waiting ever longer): a frame with room traces some of the fitting ones, which
-    leave the exploration, and the next waiting take their place.  Beyond ``most`` allowed items the knapsack holds only the bonus items and the first
-    knapsack's adds: an item it left out with the whole room is not added in less (nearly
-    always; the exact programme over 800 items cost 4-5 ms, twice a frame at 1,000 candidates)."""
+    is exact on fewer items, and slower); ``waited`` the frames each ``explore`` item waited (in
+    its flat order); ``value`` and ``cost`` every item's (switched) value and predicted ms;
+    ``fits`` (bool, every item, optional) whether it fits with its effect's unpaid fixed part.
+
+    An item's bonus is ``total`` x min((waited + 1) / ``frames``, 1): after ``frames`` frames it
+    outweighs every other item together.  At most ``most`` items get it: those that fit first,
+    then those that waited longest, then the most valuable per ms; the others compete by their
+    value alone.  Items that cannot fit cannot hold the places (they would, waiting ever longer):
+    a frame with room traces some of the fitting ones, which leave the exploration, and the next
+    waiting take their place.  Beyond ``most`` allowed items the knapsack holds only the bonus
+    items and the first knapsack's adds: an item it left out with the whole room is not added in
+    less (nearly always; the exact programme over 800 items cost 4-5 ms, twice a frame at 1,000
+    candidates)."""
     waited = np.asarray(waited, np.float64)
     bonus = np.zeros(explore.shape)
     if len(waited) > most:

@@ -13,8 +13,8 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   price after the window has moved on), each frame's rays and ms divided among its items,
   over the pairs of frames whose rays an item are ``SPREAD`` apart (``MIN_PAIRS`` of them at
   least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
-  against the rays; ``TRUSTED_RAYS``); beyond the largest item of the window, growing as rays ** ``MIN_EXPONENT``
-  (an optimistic price: a fit on small items extrapolated at its own exponent priced atrium's oak,
+  against the rays; ``TRUSTED_RAYS``); beyond the largest item of the window, growing as
+  rays ** ``MIN_EXPONENT`` (an optimistic price: a fit on small items extrapolated at its own exponent priced atrium's oak,
   never traced, at 40 ms against the oracle's 22-32, so it was never tried).  Before such a
   spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
   (the numpy work around a ray costs about twice Embree's own), the rest of the time an
