@@ -77,9 +77,9 @@ void main() {
 #if WITH_FACES
   /* The face normal, for the rays that leave this surface: the position's screen derivatives lie
      in the triangle's plane (a 2x2 quad's helper pixels extrapolate the same triangle).  Camera
-     relative positions keep them precise at any world coordinate; zero where degenerate (the
-     tracer then leaves towards the camera). */
-  /* Stored as phrt_addon/raster/gbuffer.py encode_face_normals (unorm8: (n + 1) / 2, alpha: found). */
+     relative positions keep them precise at any world coordinate.  Stored as
+     phrt_addon/raster/gbuffer.py encode_face_normals (unorm8: (n + 1) / 2, alpha 0 where
+     degenerate: the tracer then leaves towards the camera). */
   vec3 face = cross(dFdx(v_position), dFdy(v_position));
   float face_length = length(face);
   bool usable = face_length > 0.0 && !isinf(face_length) && !isnan(face_length);

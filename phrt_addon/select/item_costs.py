@@ -14,8 +14,9 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   over the pairs of frames whose rays an item are ``SPREAD`` apart (``MIN_PAIRS`` of them at
   least); never below Embree's own ms a ray (the slope of its timer, ``TraceCounters.*_embree_ms``,
   against the rays; ``TRUSTED_RAYS``); beyond the largest item of the window, growing as
-  rays ** ``MIN_EXPONENT`` (an optimistic price: a fit on small items extrapolated at its own exponent priced atrium's oak,
-  never traced, at 40 ms against the oracle's 22-32, so it was never tried).  Before such a
+  rays ** ``MIN_EXPONENT`` (an optimistic price: a fit on small items extrapolated at its own
+  exponent priced atrium's oak, never traced, at 40 ms against the oracle's 22-32, so it was
+  never tried).  Before such a
   spread: linear, ``EMBREE_FACTOR`` times Embree's ms a ray
   (the numpy work around a ray costs about twice Embree's own), the rest of the time an
   intercept paid once; the cost model's prior times ``UNMEASURED_MARGIN`` before the effect's
@@ -229,12 +230,13 @@ class ItemCosts:
             self._since_fit[effect] += 1
             if len(self.samples[effect]) <= FIT_EVERY or self._since_fit[effect] >= FIT_EVERY or new_range or \
                     not abs(ms - predicted) <= SURPRISE * predicted:
-                window = self._window(effect)
-                known = self.embree_known[j]
-                self._fit[effect] = _fit(window, effect == "shadows", None if np.isnan(known) else float(known))
-                trusted = _embree_ms_a_ray(*np.asarray(window, np.float64).T[[0, 3]])
-                if trusted[1] and trusted[0] > 0:  # 0: no Embree timer (a test double)
-                    self.embree_known[j] = trusted[0]
+                window = np.asarray(self._window(effect), np.float64)
+                embree, trusted = _embree_ms_a_ray(window[:, 0], window[:, 3])
+                if trusted and embree > 0:  # 0: no Embree timer (a test double)
+                    self.embree_known[j] = embree
+                elif not trusted and not np.isnan(self.embree_known[j]):  # capped by the last trusted one
+                    embree, trusted = min(embree, float(self.embree_known[j])), True
+                self._fit[effect] = _fit(window, effect == "shadows", (embree, trusted))
                 self._since_fit[effect] = 0
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
@@ -290,22 +292,21 @@ def _embree_ms_a_ray(rays, inside) -> tuple[float, bool]:
     return embree, trusted
 
 
-def _fit(samples, timed_setup: bool, known_embree: float | None = None) -> tuple[float, float, float, float, float]:
+def _fit(samples, timed_setup: bool, embree=None) -> tuple[float, float, float, float, float]:
     """(fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
     (rays, ms, setup ms, Embree ms, items): an item of r rays costs max(scale x r ** exponent,
     Embree's ms a ray x r), growing as r ** MIN_EXPONENT beyond the largest item measured.  The
     timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
-    casters is not counted twice).  ``known_embree``: the effect's last trusted Embree ms a ray,
-    which caps an untrusted one (``TRUSTED_RAYS``)."""
+    casters is not counted twice).  ``embree``: (Embree's ms a ray, whether it is trusted), as
+    ``ItemCosts`` settles it (an untrusted figure capped by the effect's last trusted one,
+    ``TRUSTED_RAYS``); None: :func:`_embree_ms_a_ray` of the window."""
     data = np.asarray(samples, np.float64)
     rays, ms, setup, inside, items = data.T
     setup = setup if timed_setup else np.zeros_like(setup)
     rest = np.maximum(ms - setup, 0.0)
     items = np.maximum(items, 1.0)
     i, j = _pairs(len(data))
-    embree, trusted = _embree_ms_a_ray(rays, inside)
-    if not trusted and known_embree is not None:
-        embree, trusted = min(embree, known_embree), True
+    embree, trusted = _embree_ms_a_ray(rays, inside) if embree is None else embree
     # An item's time against its rays, per item of each frame (a frame of two casters is two
     # items of half its rays each): a power law through the pairs of frames SPREAD apart.
     x, y = rays / items, rest / items
