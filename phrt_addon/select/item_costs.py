@@ -29,6 +29,17 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   it (``TraceResult.item_rays``, an EMA); an item never traced takes the median ratio of the
   effect's measured items (1 before any), so one caster's measurement corrects all of them.
 
+* each item's own correction: the effect's fit prices items by their rays, but items of equal rays
+  differ (a tree's shadow rays cross its leaves' many triangles, a statue's a few), and a median
+  over ``WINDOW`` frames follows a new item only once it holds half the window (atrium path2's
+  young tree, traced alone for 30 frames: 5-7 ms a frame over its price).  Once the power law is
+  fitted, a traced frame's ms of an effect beyond its timed setup is shared among its chosen
+  items as the fit prices their measured rays, and each item keeps an EMA (``COST_SMOOTHING``)
+  of the log of its share and of its rays.  Its correction is that share over what the current
+  fit prices those rays at (so a refit that learns the same thing does not count it twice),
+  within ``COST_RATIO_RANGE``, fading towards 1 by half every ``COST_HALF_LIFE`` frames it is
+  not traced (an item priced high is tried again).  What the chosen set costs is what is learned.
+
 At a reduced rate (quality tiers) an item casts that share of its rays and its other pixels are
 reconstructed: its cost is the per-ray part times the rate plus the reconstruction's learned ms
 per pixel (``TraceCounters.reconstruct_ms`` / ``reconstructed_px``, the median of the window)
@@ -41,28 +52,17 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from functools import lru_cache
 
 import numpy as np
 
 from ..finite import finite
 from ..schema import EFFECTS
 from .benefit_selection import TIER_COST, TIER_RATES
+from .cost_fit import embree_ms_a_ray, fit_window, item_ms, power_law
 from .frame_time import median
 from .cost_model import MS_PER_RAY_PRIOR, STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES, UNMEASURED_MARGIN
 
 WINDOW = 32
-SPREAD = 1.5  # max/min ray count of the window before the line is fitted
-# Per-ray ms over Embree's per-ray ms, before a spread of ray counts lets the slope be fitted:
-# atrium path1 (a training path), every caster's shadows, 36,000 rays: 0.56 us a ray against 0.19
-# inside Embree (a ratio, machine-independent to first order).
-EMBREE_FACTOR = 3.0
-MIN_PAIRS = 3  # pairs of frames SPREAD apart in rays before the power law is fitted
-# An item's ms grow as its rays to this power at least (1: linear).  Measured, atrium path1 at
-# 320x240, shadows beyond the lights' setup, one caster alone: 180 rays 1.0 ms, 840 rays 2.5 ms,
-# 22,000 rays 18 ms (the oracle's timing): about rays ** 0.6 (numpy's and Embree's per-call work
-# weighs on a small item, not on a large one).
-MIN_EXPONENT = 0.6
 # An effect with items that has not been traced for its stale period revises what it learned
 # (``cost_model.STALE_FRAMES``): a fixed or per-ray part learned too high (the showcase's first
 # traced frames took 2-3x the steady ms a ray) would otherwise price it out for the rest of the
@@ -79,17 +79,13 @@ ANCHOR_BASE = 2.0
 # effect of each traced frame (0.4 ms a frame on atrium).  The first FIT_EVERY samples are each fitted.
 FIT_EVERY = 4
 SURPRISE = 0.25
-# Embree's ms a ray is taken from a window's largest batch only when it holds this many rays at
-# least (or from the slope between batches SPREAD apart): on fewer its per-call work weighs on each
-# ray (atrium path1: 160 rays of one small caster 0.8 us a ray inside Embree, 1,000 rays 0.4, a
-# 36,000-ray batch 0.19).  From a smaller batch it is an upper bound: the effect's last trusted
-# figure caps it, and without one the line it gives is not extrapolated beyond the largest item
-# measured (grows as rays ** MIN_EXPONENT there).  Before: after a stale revision cleared atrium
-# path2's shadow window, one 4-ray frame priced the 30,000-ray young tree at 78-412 ms (the oracle
-# measured 17-19), which was then never traced again for 90 frames.
-TRUSTED_RAYS = 1000
 RATIO_SMOOTHING = 0.3
 RATIO_RANGE = (1e-3, 1e3)
+# An item's own cost correction (see the module's docstring): smoothed as the rays ratios are,
+# bounded so one stalled frame cannot price an item out, and fading over the fit's own window.
+COST_SMOOTHING = RATIO_SMOOTHING
+COST_RATIO_RANGE = (0.5, 2.0)
+COST_HALF_LIFE = WINDOW
 MAX_MS = 1e12
 
 
@@ -103,6 +99,10 @@ class ItemCosts:
         self.stale_after = np.full(len(EFFECTS), STALE_FRAMES, np.int64)  # idle frames before a revision
         self.learned: set[str] = set()  # the effects measured at least once in this replay
         self.ratio: dict[tuple[str, str], float] = {}
+        # (name, effect) -> (EMA of log rays, EMA of log ms, frame learned): the items' own costs.
+        self.own: dict[tuple[str, str], tuple[float, float, int]] = {}
+        self.power = {effect: False for effect in EFFECTS}  # whether the effect's power law is fitted
+        self.frames = 0  # frames ticked (the corrections' age)
         self._fit = {effect: _prior(effect) for effect in EFFECTS}
         self.embree_known = np.full(len(EFFECTS), np.nan)  # each effect's last trusted Embree ms a ray
         self._since_fit = {effect: 0 for effect in EFFECTS}  # samples added since the last fit
@@ -123,23 +123,25 @@ class ItemCosts:
         rays = np.maximum(finite(rays, nan=0.0, posinf=MAX_MS), 0.0)
         out = np.empty_like(rays)
         for j, effect in enumerate(EFFECTS):
-            out[:, j] = _item_ms(self._fit[effect], rays[:, j])
+            out[:, j] = item_ms(self._fit[effect], rays[:, j])
         return out
 
     def sample_ms(self, effect, rays: float, items: float) -> float:
         """What the current fit predicts for a traced frame of ``effect``: its fixed part and
         ``items`` items sharing ``rays`` (priced as :meth:`rays_ms` prices them)."""
         items = max(float(items), 1.0)
-        return self._fit[effect][0] + items * float(_item_ms(self._fit[effect], np.array([float(rays) / items]))[0])
+        return self._fit[effect][0] + items * float(item_ms(self._fit[effect], np.array([float(rays) / items]))[0])
 
     def tick(self, wanted, traced) -> None:
         """After a frame: ``wanted`` / ``traced`` (3,) bool, the effects that had eligible items /
         that were traced.  An effect idle for its stale period revises its costs (STALE_*)."""
         wanted, traced = np.asarray(wanted, bool), np.asarray(traced, bool)
+        self.frames += 1
         self.idle = np.where(traced, 0, self.idle + (wanted & ~traced))
         for j in np.flatnonzero(self.idle >= self.stale_after):
             effect = EFFECTS[j]
             if effect in self.learned:  # measured once: its costs divided (never: the prior stays)
+                self.own = {key: value for key, value in self.own.items() if key[1] != effect}
                 fixed, scale, exponent, embree, largest = self._fit[effect]
                 self._fit[effect] = (fixed / STALE_DISCOUNT, scale / STALE_DISCOUNT, exponent,
                                      embree / STALE_DISCOUNT, largest)
@@ -169,10 +171,26 @@ class ItemCosts:
                         out[i, j] = value
         return out
 
+    def cost_ratios(self, names) -> np.ndarray:
+        """(n, 3) each item's own cost correction (1 where none was learned), faded by its age."""
+        out = np.ones((len(names), len(EFFECTS)))
+        if self.own:
+            row = {name: i for i, name in enumerate(names)}
+            low, high = COST_RATIO_RANGE
+            for (name, effect), (log_rays, log_ms, frame) in self.own.items():
+                i = row.get(name)
+                if i is None or not self.power[effect]:
+                    continue
+                priced = float(item_ms(self._fit[effect], np.array([math.exp(log_rays)]))[0])
+                if priced > 0:
+                    ratio = min(max(math.exp(log_ms) / priced, low), high)
+                    out[i, EFFECTS.index(effect)] = ratio ** (0.5 ** ((self.frames - frame) / COST_HALF_LIFE))
+        return out
+
     def predict(self, names, expected_rays, rt_cost) -> np.ndarray:
         """(n, 3) ms of each item at full rate, its effect's fixed part not included."""
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
-        ms = self.rays_ms(rays) * np.asarray(rt_cost, np.float64).reshape(-1, 1)
+        ms = self.rays_ms(rays) * self.cost_ratios(names) * np.asarray(rt_cost, np.float64).reshape(-1, 1)
         return np.clip(finite(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
     def tier_costs(self, names, expected_rays, pixels, rt_cost) -> np.ndarray:
@@ -180,6 +198,7 @@ class ItemCosts:
         full = self.predict(names, expected_rays, rt_cost)
         out = np.empty(full.shape + (len(TIER_RATES),))
         pixels = finite(pixels, nan=0.0, posinf=0.0)
+        own = self.cost_ratios(names)
         q = np.asarray(rt_cost, np.float64).reshape(-1, 1)
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
         for j, effect in enumerate(EFFECTS):
@@ -188,8 +207,8 @@ class ItemCosts:
                 if per_pixel is None or rate >= 1.0:
                     out[:, j, option] = full[:, j] * TIER_COST[rate]
                 else:
-                    out[:, j, option] = (self.rays_ms(rays * rate)[:, j] + per_pixel * pixels[:, j] * (1.0 - rate)) \
-                        * q[:, 0]
+                    out[:, j, option] = (self.rays_ms(rays * rate)[:, j] * own[:, j]
+                                         + per_pixel * pixels[:, j] * (1.0 - rate)) * q[:, 0]
         return np.clip(finite(out, nan=MAX_MS, posinf=MAX_MS), 0.0, MAX_MS)
 
     # -- learning ------------------------------------------------------------------------------
@@ -217,6 +236,9 @@ class ItemCosts:
             if not (chosen[:, j].any() and np.isfinite(ms) and ms > 0 and rays > 0):
                 continue
             setup = float(shadow_setup_ms) if effect == "shadows" and np.isfinite(shadow_setup_ms) else 0.0
+            if self.power[effect]:  # the fit prices items by their rays: the chosen ones learn their own
+                self._learn_own(names, np.flatnonzero(chosen[:, j]), effect, ms - min(max(setup, 0.0), ms),
+                                item_rays[:, j])
             inside = float(embree_ms[j]) if np.isfinite(embree_ms[j]) else 0.0
             sample = (rays, ms, min(max(setup, 0.0), ms), min(max(inside, 0.0), ms),
                       float(np.count_nonzero(chosen[:, j])))
@@ -231,17 +253,36 @@ class ItemCosts:
             if len(self.samples[effect]) <= FIT_EVERY or self._since_fit[effect] >= FIT_EVERY or new_range or \
                     not abs(ms - predicted) <= SURPRISE * predicted:
                 window = np.asarray(self._window(effect), np.float64)
-                embree, trusted = _embree_ms_a_ray(window[:, 0], window[:, 3])
+                embree, trusted = embree_ms_a_ray(window[:, 0], window[:, 3])
                 if trusted and embree > 0:  # 0: no Embree timer (a test double)
                     self.embree_known[j] = embree
                 elif not trusted and not np.isnan(self.embree_known[j]):  # capped by the last trusted one
                     embree, trusted = min(embree, float(self.embree_known[j])), True
-                self._fit[effect] = _fit(window, effect == "shadows", (embree, trusted))
+                self._fit[effect] = fit_window(window, effect == "shadows", (embree, trusted))
+                self.power[effect] = power_law(window, effect == "shadows")
                 self._since_fit[effect] = 0
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
             if measured:
                 self._pooled[j] = median(measured)
+
+    def _learn_own(self, names, items, effect, rest_ms, item_rays) -> None:
+        """The chosen ``items`` of ``effect`` share ``rest_ms`` (its ms beyond the timed setup) as
+        the fit prices their measured ``item_rays``; each learns its share and its rays."""
+        rays = np.maximum(item_rays[items], 0.0)
+        priced = item_ms(self._fit[effect], rays)
+        total = float(np.sum(priced))
+        if not (total > 0 and np.isfinite(total) and rest_ms > 0):
+            return
+        for i, item_rays_now, share in zip(items.tolist(), rays.tolist(), (priced * (rest_ms / total)).tolist()):
+            if item_rays_now <= 0 or share <= 0:
+                continue
+            key = (names[i], effect)
+            now = (math.log(item_rays_now), math.log(share))
+            old = self.own.get(key)
+            if old is not None:
+                now = tuple(before + COST_SMOOTHING * (value - before) for before, value in zip(old[:2], now))
+            self.own[key] = (now[0], now[1], self.frames)
 
     def _window(self, effect) -> list:
         """The samples an effect's costs are fitted on: its last WINDOW traced frames and the
@@ -251,82 +292,8 @@ class ItemCosts:
         return recent + [sample for octave, sample in self.anchors[effect].items() if octave not in covered]
 
 
-def _item_ms(fit, rays: np.ndarray) -> np.ndarray:
-    """ms of items of ``rays`` each (a 1-d array, finite, >= 0) under ``fit``, fixed part excluded.
-    Beyond the largest item measured, the slowest growth measured (MIN_EXPONENT): an optimistic
-    price, so an item larger than any traced yet is tried and measured once (its first traced frame
-    corrects the fit) instead of being priced out for good."""
-    _, scale, exponent, embree, largest = fit
-    within = np.minimum(rays, largest)
-    beyond = np.divide(rays, within, out=np.ones_like(within), where=within > 0)
-    return np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays)
-
-
 def _octave(rays_per_item: float) -> int:
     return math.floor(math.log2(max(rays_per_item, 1.0)) / math.log2(ANCHOR_BASE))  # exact at powers of 2
-
-
-@lru_cache(maxsize=8)
-def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The (i, j) index pairs i < j of a window of n samples (read-only, kept per n)."""
-    i, j = np.triu_indices(n, 1)
-    i.flags.writeable = j.flags.writeable = False
-    return i, j
-
-
-def _embree_ms_a_ray(rays, inside) -> tuple[float, bool]:
-    """(Embree's own ms a ray, whether it is trusted) from a window's batches (``rays``, ``inside``
-    their ms inside Embree): the slope of its time against the rays over pairs of batches SPREAD
-    apart (its per-call overhead is no ray's), else its largest batch's ms a ray, trusted from
-    TRUSTED_RAYS rays."""
-    i, j = _pairs(len(rays))
-    apart = np.maximum(rays[i], rays[j]) >= SPREAD * np.minimum(rays[i], rays[j])
-    largest = int(np.argmax(rays))
-    embree = float(inside[largest] / rays[largest])
-    trusted = bool(rays[largest] >= TRUSTED_RAYS)
-    if np.any(apart):
-        first, second = i[apart], j[apart]
-        slope = median((inside[second] - inside[first]) / (rays[second] - rays[first]))
-        if slope > 0:
-            embree, trusted = min(slope, embree), True
-    return embree, trusted
-
-
-def _fit(samples, timed_setup: bool, embree=None) -> tuple[float, float, float, float, float]:
-    """(fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
-    (rays, ms, setup ms, Embree ms, items): an item of r rays costs max(scale x r ** exponent,
-    Embree's ms a ray x r), growing as r ** MIN_EXPONENT beyond the largest item measured.  The
-    timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
-    casters is not counted twice).  ``embree``: (Embree's ms a ray, whether it is trusted), as
-    ``ItemCosts`` settles it (an untrusted figure capped by the effect's last trusted one,
-    ``TRUSTED_RAYS``); None: :func:`_embree_ms_a_ray` of the window."""
-    data = np.asarray(samples, np.float64)
-    rays, ms, setup, inside, items = data.T
-    setup = setup if timed_setup else np.zeros_like(setup)
-    rest = np.maximum(ms - setup, 0.0)
-    items = np.maximum(items, 1.0)
-    i, j = _pairs(len(data))
-    embree, trusted = _embree_ms_a_ray(rays, inside) if embree is None else embree
-    # An item's time against its rays, per item of each frame (a frame of two casters is two
-    # items of half its rays each): a power law through the pairs of frames SPREAD apart.
-    x, y = rays / items, rest / items
-    usable = (x > 0) & (y > 0)
-    apart = (np.maximum(x[i], x[j]) >= SPREAD * np.minimum(x[i], x[j])) & usable[i] & usable[j]
-    if np.count_nonzero(apart) >= MIN_PAIRS:
-        first, second = i[apart], j[apart]
-        exponent = min(max(median(np.log(y[second] / y[first]) / np.log(x[second] / x[first])), MIN_EXPONENT), 1.0)
-        scale = median(y[usable] / x[usable] ** exponent)
-        return median(setup), scale, exponent, embree, float(np.max(x[usable]))
-    # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
-    # fixed part paid once (its intercept); from an untrusted Embree figure, not beyond the largest
-    # item measured.
-    per_ray = EMBREE_FACTOR * embree
-    intercept = float(np.clip(median(rest - per_ray * rays), 0.0, float(rest.min())))
-    if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
-        per_ray = median(np.maximum(rest - intercept, 0.0) / rays)
-    if trusted or not np.any(usable):
-        return median(setup) + intercept, per_ray, 1.0, embree, np.inf
-    return median(setup) + intercept, per_ray, 1.0, 0.0, float(np.max(x[usable]))  # no floor from it
 
 
 def _prior(effect) -> tuple[float, float, float, float, float]:

@@ -3,7 +3,7 @@ each item's rays ratio, an unmeasured item taking its effect's median."""
 import numpy as np
 import pytest
 
-from phrt_addon.select import item_costs
+from phrt_addon.select import cost_fit, item_costs
 from phrt_addon.select.item_costs import ItemCosts
 
 NAMES = ["Small", "Large", "Mirror"]
@@ -27,7 +27,7 @@ def test_a_small_casters_frames_do_not_price_a_large_caster_by_their_fixed_part(
     for _ in range(3):
         expected = shadows_frame(costs, 1000, 36000, chosen_large=False)
     fixed, per_ray = costs.fixed_ms()[0], costs.per_ray_ms()[0]
-    assert per_ray == pytest.approx(item_costs.EMBREE_FACTOR * 2e-4)
+    assert per_ray == pytest.approx(cost_fit.EMBREE_FACTOR * 2e-4)
     assert 3.2 <= fixed <= 4.6
     # The large caster, never traced, takes the small one's rays ratio (0.5).
     large = costs.predict(NAMES, expected, np.ones(3))[1, 0]
@@ -70,7 +70,7 @@ def test_an_item_never_costs_less_than_its_rays_inside_embree():
     for casters in ([180], [840], [180], [840]):
         power_frame(costs, casters, exponent=0.3, embree=1e-3)
     _, _, exponent, embree, _ = costs._fit["shadows"]
-    assert exponent == pytest.approx(item_costs.MIN_EXPONENT) and embree == pytest.approx(1e-3)
+    assert exponent == pytest.approx(cost_fit.MIN_EXPONENT) and embree == pytest.approx(1e-3)
     assert costs.predict(["Oak"], np.array([[1e6, 0, 0]]), [1.0])[0, 0] == pytest.approx(1e6 * 1e-3)
 
 
@@ -138,7 +138,7 @@ def test_an_item_beyond_the_largest_measured_grows_at_the_slowest_exponent():
     within = costs.predict(["C"], np.array([[1000.0, 0, 0]]), [1.0])[0, 0]
     assert within == pytest.approx(1e-3 * 1000, rel=1e-6)
     oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
-    assert oak == pytest.approx(1e-3 * 2000 * 11 ** item_costs.MIN_EXPONENT, rel=1e-6)
+    assert oak == pytest.approx(1e-3 * 2000 * 11 ** cost_fit.MIN_EXPONENT, rel=1e-6)
     assert oak < 22000 * 1e-3
     # Once a large caster is measured, its own ms stand (the window's fit reaches it).
     power_frame(costs, [22000], exponent=1.0, scale=1e-3, embree=1e-5)
@@ -219,11 +219,11 @@ def test_the_fit_waits_for_a_few_frames_unless_one_surprises_it():
     for _ in range(item_costs.FIT_EVERY - 1):
         power_frame(costs, [600], scale=0.05 * 1.1)
     # the FIT_EVERY-th frame fitted them: the fit of the window as it is now
-    assert costs._fit["shadows"] == item_costs._fit(costs._window("shadows"), True)
+    assert costs._fit["shadows"] == cost_fit.fit_window(costs._window("shadows"), True)
     power_frame(costs, [600], scale=0.05 * 1.1)  # agrees: waits
-    assert costs._fit["shadows"] != item_costs._fit(costs._window("shadows"), True)
+    assert costs._fit["shadows"] != cost_fit.fit_window(costs._window("shadows"), True)
     power_frame(costs, [600], scale=0.5, setup=30.0)  # a 10x spike: fitted at once
-    assert costs._fit["shadows"] == item_costs._fit(costs._window("shadows"), True)
+    assert costs._fit["shadows"] == cost_fit.fit_window(costs._window("shadows"), True)
     reach = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
     power_frame(costs, [22000])  # beyond the largest item measured
     assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] != reach
@@ -240,7 +240,7 @@ def test_a_fit_that_waits_is_the_fit_of_every_frame_on_its_turn():
         drift = 1.0 + 0.04 * number  # up 4% a frame
         power_frame(waiting, casters, scale=0.05 * drift)
         power_frame(every, casters, scale=0.05 * drift)
-        every._fit["shadows"] = item_costs._fit(every._window("shadows"), True)
+        every._fit["shadows"] = cost_fit.fit_window(every._window("shadows"), True)
         if waiting._since_fit["shadows"] == 0:
             assert waiting._fit["shadows"] == every._fit["shadows"]
         else:
@@ -284,7 +284,7 @@ def test_a_tiny_batch_after_a_revision_does_not_price_a_large_caster_by_embrees_
     _tiny_frame(costs, 4)
     tree = costs.predict(["Small", "Tree"], np.array([[4, 0, 0], [30000, 0, 0]], float), [1.0, 1.0])[1, 0]
     rays = 30000 * costs.ratios(["Tree"])[0, 0]  # the effect's median rays ratio
-    assert tree == pytest.approx(rays * item_costs.EMBREE_FACTOR * 1e-4, rel=1e-6)
+    assert tree == pytest.approx(rays * cost_fit.EMBREE_FACTOR * 1e-4, rel=1e-6)
     # The slope between two batches SPREAD apart is trusted again, per-call work out.
     _tiny_frame(costs, 143, embree_ms=0.05 + 139 * 2e-4)
     assert costs._fit["shadows"][3] == pytest.approx(2e-4, rel=1e-6)
@@ -303,8 +303,73 @@ def test_a_line_from_tiny_batches_alone_is_not_extrapolated_beyond_them():
     assert np.isnan(costs.embree_known[0])
     rays = 30000 * costs.ratios(["Tree"])[0, 0]
     tree = costs.predict(["Tree"], np.array([[30000.0, 0, 0]]), [1.0])[0, 0]
-    assert tree == pytest.approx(per_ray * 5 * (rays / 5) ** item_costs.MIN_EXPONENT, rel=1e-6)
+    assert tree == pytest.approx(per_ray * 5 * (rays / 5) ** cost_fit.MIN_EXPONENT, rel=1e-6)
     assert tree < 0.05 * per_ray * rays
     # Within what was measured, the line.
     assert costs.predict(["Small"], np.array([[4.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(4 * per_ray)
 
+
+
+def law(rays, scale=0.05, exponent=0.6):
+    return scale * np.asarray(rays, float) ** exponent
+
+
+def item_frame(costs, name, rays, factor=1.0, setup=3.0):
+    """``name`` traced alone (shadows), ``factor`` x the power law's ms beyond the setup."""
+    expected = np.array([[float(rays), 0, 0]])
+    chosen = np.array([[True, False, False]])
+    costs.tick([True, False, False], [True, False, False])
+    costs.observe([name], expected, expected, chosen, chosen.astype(float), [setup + factor * law(rays), 0, 0],
+                  [float(rays), 0, 0], shadow_setup_ms=setup, embree_ms=[2e-4 * rays, 0, 0])
+
+
+def test_an_item_dearer_than_its_rays_learns_its_own_cost():
+    """Statues and a wall follow the power law; a tree's 20,000 rays cost 1.5x what the law prices
+    (its leaves' triangles).  Alternating with the wall, the tree learns its own price within a few
+    of its frames (the window's median would follow only once it held half the window), and the
+    others keep theirs."""
+    costs = ItemCosts()
+    for rays in (180, 840, 400, 1600, 250, 1200, 15000, 25000, 18000, 22000):
+        item_frame(costs, "Statue" if rays < 10000 else "Wall", rays)
+    assert costs.power["shadows"]
+    tree = np.array([[20000.0, 0, 0]])
+    fit_alone = float(costs.rays_ms(tree)[0, 0])
+    for rays in (20000, 300, 19000, 21000, 900, 20000, 21000, 500, 20000, 19000):
+        name = "Statue" if rays < 1000 else ("Tree" if rays == 20000 else "Wall")
+        item_frame(costs, name, rays, factor=1.5 if name == "Tree" else 1.0)
+    measured = 1.5 * law(20000)
+    assert costs.predict(["Tree"], tree, [1.0])[0, 0] == pytest.approx(measured, rel=0.12)
+    assert abs(float(costs.rays_ms(tree)[0, 0]) - measured) > 0.2 * measured  # the fit alone misses it
+    assert fit_alone == pytest.approx(law(20000), rel=0.02)
+    assert costs.predict(["Statue"], np.array([[800.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(law(800), rel=0.1)
+    assert costs.predict(["Wall"], tree, [1.0])[0, 0] == pytest.approx(law(20000), rel=0.1)
+    # Not traced for COST_HALF_LIFE frames, its correction fades to its square root (tried again).
+    before = costs.predict(["Tree"], tree, [1.0])[0, 0] / costs.rays_ms(tree)[0, 0]
+    for _ in range(item_costs.COST_HALF_LIFE):
+        costs.tick([True, False, False], [True, False, False])
+    after = costs.predict(["Tree"], tree, [1.0])[0, 0] / costs.rays_ms(tree)[0, 0]
+    assert after == pytest.approx(before ** 0.5, rel=1e-6)
+
+
+def test_an_items_own_cost_is_against_the_current_fit_not_counted_twice():
+    """One caster traced alone, following the law exactly: whatever the fit said on its way there,
+    its own cost ends at the law, so the correction learned against early fits does not stay."""
+    costs = ItemCosts()
+    for rays in (180, 840, 400, 1600, 250, 1200, 3000, 600, 2000, 350):
+        item_frame(costs, "Statue", rays)
+    for rays in (300, 1000, 2500):
+        assert costs.predict(["Statue"], np.array([[float(rays), 0, 0]]), [1.0])[0, 0] == pytest.approx(
+            law(rays), rel=1e-6)
+    assert costs.cost_ratios(["Statue"])[0, 0] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_an_items_own_cost_is_bounded_and_cleared_by_a_stale_revision():
+    costs = ItemCosts()
+    for rays in (180, 840, 400, 1600, 250, 1200):
+        item_frame(costs, "Statue", rays)
+    for _ in range(10):  # a stalled frame after another: 50x the law
+        item_frame(costs, "Stalled", 5000, factor=50.0)
+    assert costs.cost_ratios(["Stalled"])[0, 0] <= item_costs.COST_RATIO_RANGE[1] + 1e-9
+    for _ in range(int(costs.stale_after[0])):  # wanted, never traced: the effect's costs are revised
+        costs.tick([True, False, False], [False, False, False])
+    assert costs.cost_ratios(["Stalled"])[0, 0] == 1.0
