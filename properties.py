@@ -72,7 +72,8 @@ def _element_fields(owner):
         ),
         "rt_cost": FloatProperty(
             name="Cost Multiplier (Q)",
-            description="The paper's Q: a multiplier on the engine's own measured ray tracing cost of this element",
+            description="The paper's Q: how costly the selection takes this element to be, as a multiple of its "
+                        "measured ray tracing cost (the frame's time is still planned with the real cost)",
             default=1.0, min=1e-3, soft_max=10.0,
         ),
     }

@@ -73,10 +73,8 @@ class FrameRenderer:
         self.frames_rendered = self.traced_frames = 0
         self.element_bounds = ElementBounds()
         self.pixel_grid = PixelGrid()  # the pixel coordinates of element_pixel_stats, kept per size
-        # The error-aware relevance's per-element estimates (phrt_addon/select/benefit.py).
-        self.benefit_model = benefit.BenefitModel()
-        # The BENEFIT selection's per-item estimates and margin (phrt_addon/select/benefit_selection.py).
-        self.benefit_selector = benefit_selection.BenefitSelector()
+        self.benefit_model = benefit.BenefitModel()  # the error-aware relevance's per-element estimates
+        self.benefit_selector = benefit_selection.BenefitSelector()  # BENEFIT's per-item estimates, margin
         self.item_costs = item_costs.ItemCosts()
         # Names to trace instead of the heuristic's choice (the oracle, outside timed runs), or None;
         # with it, per effect name the rate every element's effect is traced at (tools/rate_flip.py).
@@ -333,17 +331,18 @@ class FrameRenderer:
         competing = terms.candidate & terms.visible & terms.within_area
         eligible = flags & competing[:, None] & (pixels > 0)
         overhead = self.cost_model.trace_overhead_ms()
-        cost_ms = self.item_costs.predict(frame_elements.names, expected_rays(frame_elements.area_px, effect_rays),
-                                          frame_elements.rt_cost)
+        cost_ms = self.item_costs.predict(frame_elements.names, expected_rays(frame_elements.area_px, effect_rays))
         time_left = self.benefit_selector.aimed_time_left(selection.time_left_ms, selection.budget_ms)
-        choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority,
+        # Q weighs the choice (value per ms / Q); the frame is planned with the ms items take.
+        choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority
+                                              / np.maximum(frame_elements.rt_cost, selection_terms.MIN_RT_COST),
                                               cost_ms, time_left, overhead, tiers=tiers,
                                               fixed_ms=self.item_costs.fixed_ms(),
                                               unmeasured=self.item_costs.unmeasured(),
                                               visible=terms.visible,
                                               tier_costs=self.item_costs.tier_costs(
                                                   frame_elements.names, expected_rays(frame_elements.area_px, effect_rays),
-                                                  pixels, frame_elements.rt_cost) if tiers else None)
+                                                  pixels) if tiers else None)
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)

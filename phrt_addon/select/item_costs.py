@@ -46,7 +46,9 @@ per pixel (``TraceCounters.reconstruct_ms`` / ``reconstructed_px``, the median o
 times the pixels not cast; before the first reconstruction is measured, the full cost times the
 prior share ``TIER_COST``.  The fixed part is the same at every rate.
 
-Q (``rt_cost``) scales an item's cost; it never adds a hidden margin.  Plain numpy, no bpy.
+These are the ms an item takes: the designer's Q (``rt_cost``) weighs it in the choice (its value
+per ms is divided by Q, ``FrameRenderer._choose_items``), never the time the frame is planned with.
+Plain numpy, no bpy.
 """
 from __future__ import annotations
 
@@ -187,19 +189,18 @@ class ItemCosts:
                     out[i, EFFECTS.index(effect)] = ratio ** (0.5 ** ((self.frames - frame) / COST_HALF_LIFE))
         return out
 
-    def predict(self, names, expected_rays, rt_cost) -> np.ndarray:
+    def predict(self, names, expected_rays) -> np.ndarray:
         """(n, 3) ms of each item at full rate, its effect's fixed part not included."""
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
-        ms = self.rays_ms(rays) * self.cost_ratios(names) * np.asarray(rt_cost, np.float64).reshape(-1, 1)
+        ms = self.rays_ms(rays) * self.cost_ratios(names)
         return np.clip(finite(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
-    def tier_costs(self, names, expected_rays, pixels, rt_cost) -> np.ndarray:
+    def tier_costs(self, names, expected_rays, pixels) -> np.ndarray:
         """(n, 3, len(TIER_RATES)) ms of each item at each rate of ``TIER_RATES``."""
-        full = self.predict(names, expected_rays, rt_cost)
+        full = self.predict(names, expected_rays)
         out = np.empty(full.shape + (len(TIER_RATES),))
         pixels = finite(pixels, nan=0.0, posinf=0.0)
         own = self.cost_ratios(names)
-        q = np.asarray(rt_cost, np.float64).reshape(-1, 1)
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
         for j, effect in enumerate(EFFECTS):
             per_pixel = float(np.median(self.reconstruction[effect])) if self.reconstruction[effect] else None
@@ -208,7 +209,7 @@ class ItemCosts:
                     out[:, j, option] = full[:, j] * TIER_COST[rate]
                 else:
                     out[:, j, option] = (self.rays_ms(rays * rate)[:, j] * own[:, j]
-                                         + per_pixel * pixels[:, j] * (1.0 - rate)) * q[:, 0]
+                                         + per_pixel * pixels[:, j] * (1.0 - rate))
         return np.clip(finite(out, nan=MAX_MS, posinf=MAX_MS), 0.0, MAX_MS)
 
     # -- learning ------------------------------------------------------------------------------

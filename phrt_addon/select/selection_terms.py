@@ -79,6 +79,8 @@ MIN_NEAR_CLIP_DISTANCE = 1e-6
 FAR_DISTANCE = 1e12
 MAX_PRIORITY = 1e15
 MAX_RT_COST = 1e12
+# The smallest Q the BENEFIT choice divides an item's value by (the Blender property's own minimum).
+MIN_RT_COST = 1e-3
 MAX_RAYS_PER_PIXEL = 1e6
 MAX_SELECTION_WEIGHT = 1e6
 MAX_VISIBILITY = 1e12

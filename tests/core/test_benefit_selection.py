@@ -161,6 +161,22 @@ def test_a_frame_with_benefit_traces_items_and_logs_their_estimates():
     assert effects["reflections"][1] or result.stats["reflection_rays"] > 0
 
 
+def test_q_weighs_the_choice_not_the_time_the_frame_is_planned_with():
+    """A designer's Q of 4 on the block: the choice takes its value per ms as a quarter (its logged
+    estimate, the value the knapsack used, is divided by Q), but its predicted ms stay what tracing
+    it takes, so the frame's predicted trace time (what the budget is kept with) is unchanged."""
+    rows = {}
+    for q in (1.0, 4.0):
+        snapshot = benefit_mirror_scene(block_shadows=True)
+        snapshot.elements[1].rt_cost = q
+        result, _, _ = render(snapshot)
+        rows[q] = {row["element"]: row for row in result.selection_rows}
+        assert rows[q]["Block"]["selected"] == 1  # the whole frame's time is there: both are bought
+    assert rows[4.0]["Block"]["predicted_ms"] == pytest.approx(rows[1.0]["Block"]["predicted_ms"], rel=1e-9)
+    assert rows[4.0]["Block"]["benefit"] == pytest.approx(rows[1.0]["Block"]["benefit"] / 4.0, rel=1e-9)
+    assert rows[4.0]["Mirror"]["benefit"] == pytest.approx(rows[1.0]["Mirror"]["benefit"], rel=1e-9)
+
+
 def test_the_mirror_outranks_the_matte_reflection_from_the_first_frame():
     result, _, _ = render(benefit_mirror_scene(block_shadows=False))
     value = result.selection.benefit_estimate

@@ -30,7 +30,7 @@ def test_a_small_casters_frames_do_not_price_a_large_caster_by_their_fixed_part(
     assert per_ray == pytest.approx(cost_fit.EMBREE_FACTOR * 2e-4)
     assert 3.2 <= fixed <= 4.6
     # The large caster, never traced, takes the small one's rays ratio (0.5).
-    large = costs.predict(NAMES, expected, np.ones(3))[1, 0]
+    large = costs.predict(NAMES, expected)[1, 0]
     assert large == pytest.approx(36000 * per_ray, rel=1e-6)
     assert large < 0.2 * 36 * 4.6
 
@@ -60,9 +60,9 @@ def test_a_spread_of_ray_counts_fits_the_power_law():
     assert exponent == pytest.approx(0.6, rel=1e-6) and scale == pytest.approx(0.05, rel=1e-6)
     assert fixed == pytest.approx(3.0)
     names, expected = ["Oak"], np.array([[22000.0, 0, 0]])
-    assert costs.predict(names, expected, [1.0])[0, 0] == pytest.approx(0.05 * 22000 ** 0.6, rel=1e-6)
+    assert costs.predict(names, expected)[0, 0] == pytest.approx(0.05 * 22000 ** 0.6, rel=1e-6)
     # The small casters' ms a ray (0.05 x 180 ** -0.4 = 6.3 us) would have said 140 ms.
-    assert costs.predict(names, expected, [1.0])[0, 0] < 0.25 * 22000 * 0.05 * 180 ** -0.4
+    assert costs.predict(names, expected)[0, 0] < 0.25 * 22000 * 0.05 * 180 ** -0.4
 
 
 def test_an_item_never_costs_less_than_its_rays_inside_embree():
@@ -71,15 +71,15 @@ def test_an_item_never_costs_less_than_its_rays_inside_embree():
         power_frame(costs, casters, exponent=0.3, embree=1e-3)
     _, _, exponent, embree, _ = costs._fit["shadows"]
     assert exponent == pytest.approx(cost_fit.MIN_EXPONENT) and embree == pytest.approx(1e-3)
-    assert costs.predict(["Oak"], np.array([[1e6, 0, 0]]), [1.0])[0, 0] == pytest.approx(1e6 * 1e-3)
+    assert costs.predict(["Oak"], np.array([[1e6, 0, 0]]))[0, 0] == pytest.approx(1e6 * 1e-3)
 
 
-def test_rays_ratio_is_learned_per_item_and_q_scales_the_cost():
+def test_rays_ratio_is_learned_per_item():
     costs = ItemCosts()
     expected = shadows_frame(costs, 1000, 36000, chosen_large=True)
     assert costs.ratios(NAMES)[:, 0] == pytest.approx([0.5, 0.5, 0.5])
-    ms = costs.predict(NAMES, expected, np.array([1.0, 2.0, 1.0]))
-    assert ms[1, 0] == pytest.approx(2 * 36000 * costs.per_ray_ms()[0])
+    ms = costs.predict(NAMES, expected)
+    assert ms[1, 0] == pytest.approx(36000 * costs.per_ray_ms()[0])
     # The mirror's reflection was never traced: the cost model's prior, margined.
     assert costs.per_ray_ms()[1] == pytest.approx(item_costs.MS_PER_RAY_PRIOR["reflections"]
                                                   * item_costs.UNMEASURED_MARGIN)
@@ -92,7 +92,7 @@ def test_bad_numbers_are_not_learned():
     costs.observe(["A"], expected, np.array([[np.nan, 0, 0]]), np.array([[True, False, False]]),
                   np.ones((1, 3)), [np.inf, 0, 0], [50, 0, 0], shadow_setup_ms=np.nan, embree_ms=[np.nan, 0, 0])
     assert not costs.samples["shadows"] and not costs.ratio
-    ms = costs.predict(["A"], np.array([[np.inf, np.nan, 1.0]]), [1.0])
+    ms = costs.predict(["A"], np.array([[np.inf, np.nan, 1.0]]))
     assert np.all(np.isfinite(ms)) and np.all(ms >= 0)
 
 
@@ -104,8 +104,8 @@ def test_a_reduced_rate_costs_its_share_of_the_rays_plus_its_reconstruction():
     expected = np.array([[0.0, 4000.0, 0.0]])
     pixels = np.array([[0.0, 2000.0, 0.0]])
     # Before any reconstruction is measured: the priors' shares of the full cost.
-    prior = costs.tier_costs(names, expected, pixels, [1.0])
-    full = costs.predict(names, expected, [1.0])[0, 1]
+    prior = costs.tier_costs(names, expected, pixels)
+    full = costs.predict(names, expected)[0, 1]
     assert prior[0, 1].tolist() == pytest.approx([full * item_costs.TIER_COST[r] for r in item_costs.TIER_RATES])
     ray_ms = (lambda rays: 0.02 * rays ** 0.8)
     for rate, recon in ((1.0, 0.0), (0.25, 1.5), (1.0, 0.0), (0.5, 1.0), (0.25, 1.5)):
@@ -118,7 +118,7 @@ def test_a_reduced_rate_costs_its_share_of_the_rays_plus_its_reconstruction():
                       reconstructed_px={"reflections": filled} if recon else {})
     assert costs._fit["reflections"][2] == pytest.approx(0.8, rel=1e-6)
     assert costs.fixed_ms()[1] == pytest.approx(0.0, abs=1e-9)
-    tiers = costs.tier_costs(names, expected, pixels, [1.0])[0, 1]
+    tiers = costs.tier_costs(names, expected, pixels)[0, 1]
     per_pixel = 1.5 / 1500  # the reconstruction's ms per pixel filled
     by_rate = dict(zip(item_costs.TIER_RATES, tiers))
     assert by_rate[1.0] == pytest.approx(ray_ms(4000))
@@ -135,14 +135,14 @@ def test_an_item_beyond_the_largest_measured_grows_at_the_slowest_exponent():
         power_frame(costs, casters, exponent=1.0, scale=1e-3, embree=1e-5)
     _, scale, exponent, _, largest = costs._fit["shadows"]
     assert exponent == pytest.approx(1.0) and largest == pytest.approx(2000)
-    within = costs.predict(["C"], np.array([[1000.0, 0, 0]]), [1.0])[0, 0]
+    within = costs.predict(["C"], np.array([[1000.0, 0, 0]]))[0, 0]
     assert within == pytest.approx(1e-3 * 1000, rel=1e-6)
-    oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
+    oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]))[0, 0]
     assert oak == pytest.approx(1e-3 * 2000 * 11 ** cost_fit.MIN_EXPONENT, rel=1e-6)
     assert oak < 22000 * 1e-3
     # Once a large caster is measured, its own ms stand (the window's fit reaches it).
     power_frame(costs, [22000], exponent=1.0, scale=1e-3, embree=1e-5)
-    assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(22.0, rel=1e-6)
+    assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]))[0, 0] == pytest.approx(22.0, rel=1e-6)
 
 
 def test_an_idle_effect_revises_its_costs_by_halves_ever_more_rarely():
@@ -153,16 +153,16 @@ def test_an_idle_effect_revises_its_costs_by_halves_ever_more_rarely():
     its prior."""
     costs = ItemCosts()
     expected = shadows_frame(costs, 1000, 36000, chosen_large=True)
-    before = costs.predict(NAMES, expected, np.ones(3))
+    before = costs.predict(NAMES, expected)
     ratios = costs.ratios(NAMES).copy()
     prior = costs.per_ray_ms()[1]
     wanted, idle = np.array([True, True, False]), np.zeros(3, bool)
     for _ in range(item_costs.STALE_FRAMES - 1):
         costs.tick(wanted, idle)
-    assert costs.predict(NAMES, expected, np.ones(3))[:, 0] == pytest.approx(before[:, 0])
+    assert costs.predict(NAMES, expected)[:, 0] == pytest.approx(before[:, 0])
     assert not costs.unmeasured()[0]
     costs.tick(wanted, idle)  # the STALE_FRAMES-th idle frame
-    after = costs.predict(NAMES, expected, np.ones(3))
+    after = costs.predict(NAMES, expected)
     assert after[:, 0] == pytest.approx(before[:, 0] / item_costs.STALE_DISCOUNT)
     assert costs.fixed_ms()[0] > 0 and costs.unmeasured()[0]
     assert costs.ratios(NAMES) == pytest.approx(ratios)
@@ -170,9 +170,9 @@ def test_an_idle_effect_revises_its_costs_by_halves_ever_more_rarely():
     # The next revision comes after twice the idle frames.
     for _ in range(2 * item_costs.STALE_FRAMES - 1):
         costs.tick(wanted, idle)
-    assert costs.predict(NAMES, expected, np.ones(3))[:, 0] == pytest.approx(after[:, 0])
+    assert costs.predict(NAMES, expected)[:, 0] == pytest.approx(after[:, 0])
     costs.tick(wanted, idle)
-    assert costs.predict(NAMES, expected, np.ones(3))[:, 0] == pytest.approx(after[:, 0] / item_costs.STALE_DISCOUNT)
+    assert costs.predict(NAMES, expected)[:, 0] == pytest.approx(after[:, 0] / item_costs.STALE_DISCOUNT)
     # A frame that traces the effect resets its idle count: no revision while it is traced.
     for _ in range(10 * item_costs.STALE_MAX_FRAMES):
         costs.tick(wanted, np.array([True, False, False]))
@@ -193,7 +193,7 @@ def test_a_large_item_measured_once_keeps_its_price_after_the_window_moves_on():
     for frame in range(item_costs.WINDOW):
         power_frame(costs, small[frame % len(small)], exponent=1.0, scale=1e-3, embree=1e-5)
     assert all(sample[0] <= 2000 for sample in costs.samples["shadows"])  # the large frame left the window
-    oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
+    oak = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]))[0, 0]
     assert oak == pytest.approx(22.0, rel=1e-6)
     # A newer frame in the same octave (20,000 rays) is the anchor now, the older one is gone.
     power_frame(costs, [20000], exponent=1.0, scale=1e-3, embree=1e-5)
@@ -213,9 +213,9 @@ def test_the_fit_waits_for_a_few_frames_unless_one_surprises_it():
     for casters in ([180], [840], [500, 500], [180], [840], [500, 500], [180], [840]):
         power_frame(costs, casters)
     probe = np.array([[600.0, 0, 0]])
-    settled = costs.predict(["C"], probe, [1.0])[0, 0]
+    settled = costs.predict(["C"], probe)[0, 0]
     power_frame(costs, [600], scale=0.05 * 1.1)  # 10% dearer: within SURPRISE of the fit
-    assert costs.predict(["C"], probe, [1.0])[0, 0] == settled  # not fitted yet
+    assert costs.predict(["C"], probe)[0, 0] == settled  # not fitted yet
     for _ in range(item_costs.FIT_EVERY - 1):
         power_frame(costs, [600], scale=0.05 * 1.1)
     # the FIT_EVERY-th frame fitted them: the fit of the window as it is now
@@ -224,9 +224,9 @@ def test_the_fit_waits_for_a_few_frames_unless_one_surprises_it():
     assert costs._fit["shadows"] != cost_fit.fit_window(costs._window("shadows"), True)
     power_frame(costs, [600], scale=0.5, setup=30.0)  # a 10x spike: fitted at once
     assert costs._fit["shadows"] == cost_fit.fit_window(costs._window("shadows"), True)
-    reach = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0]
+    reach = costs.predict(["Oak"], np.array([[22000.0, 0, 0]]))[0, 0]
     power_frame(costs, [22000])  # beyond the largest item measured
-    assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]), [1.0])[0, 0] != reach
+    assert costs.predict(["Oak"], np.array([[22000.0, 0, 0]]))[0, 0] != reach
 
 
 def test_a_fit_that_waits_is_the_fit_of_every_frame_on_its_turn():
@@ -282,7 +282,7 @@ def test_a_tiny_batch_after_a_revision_does_not_price_a_large_caster_by_embrees_
         costs.tick([True, False, False], [False, False, False])
     assert costs.embree_known[0] == pytest.approx(2e-4 / item_costs.STALE_DISCOUNT)
     _tiny_frame(costs, 4)
-    tree = costs.predict(["Small", "Tree"], np.array([[4, 0, 0], [30000, 0, 0]], float), [1.0, 1.0])[1, 0]
+    tree = costs.predict(["Small", "Tree"], np.array([[4, 0, 0], [30000, 0, 0]], float))[1, 0]
     rays = 30000 * costs.ratios(["Tree"])[0, 0]  # the effect's median rays ratio
     assert tree == pytest.approx(rays * cost_fit.EMBREE_FACTOR * 1e-4, rel=1e-6)
     # The slope between two batches SPREAD apart is trusted again, per-call work out.
@@ -302,11 +302,11 @@ def test_a_line_from_tiny_batches_alone_is_not_extrapolated_beyond_them():
     assert exponent == 1.0 and embree == 0.0 and largest == pytest.approx(5.0)
     assert np.isnan(costs.embree_known[0])
     rays = 30000 * costs.ratios(["Tree"])[0, 0]
-    tree = costs.predict(["Tree"], np.array([[30000.0, 0, 0]]), [1.0])[0, 0]
+    tree = costs.predict(["Tree"], np.array([[30000.0, 0, 0]]))[0, 0]
     assert tree == pytest.approx(per_ray * 5 * (rays / 5) ** cost_fit.MIN_EXPONENT, rel=1e-6)
     assert tree < 0.05 * per_ray * rays
     # Within what was measured, the line.
-    assert costs.predict(["Small"], np.array([[4.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(4 * per_ray)
+    assert costs.predict(["Small"], np.array([[4.0, 0, 0]]))[0, 0] == pytest.approx(4 * per_ray)
 
 
 
@@ -338,16 +338,16 @@ def test_an_item_dearer_than_its_rays_learns_its_own_cost():
         name = "Statue" if rays < 1000 else ("Tree" if rays == 20000 else "Wall")
         item_frame(costs, name, rays, factor=1.5 if name == "Tree" else 1.0)
     measured = 1.5 * law(20000)
-    assert costs.predict(["Tree"], tree, [1.0])[0, 0] == pytest.approx(measured, rel=0.12)
+    assert costs.predict(["Tree"], tree)[0, 0] == pytest.approx(measured, rel=0.12)
     assert abs(float(costs.rays_ms(tree)[0, 0]) - measured) > 0.2 * measured  # the fit alone misses it
     assert fit_alone == pytest.approx(law(20000), rel=0.02)
-    assert costs.predict(["Statue"], np.array([[800.0, 0, 0]]), [1.0])[0, 0] == pytest.approx(law(800), rel=0.1)
-    assert costs.predict(["Wall"], tree, [1.0])[0, 0] == pytest.approx(law(20000), rel=0.1)
+    assert costs.predict(["Statue"], np.array([[800.0, 0, 0]]))[0, 0] == pytest.approx(law(800), rel=0.1)
+    assert costs.predict(["Wall"], tree)[0, 0] == pytest.approx(law(20000), rel=0.1)
     # Not traced for COST_HALF_LIFE frames, its correction fades to its square root (tried again).
-    before = costs.predict(["Tree"], tree, [1.0])[0, 0] / costs.rays_ms(tree)[0, 0]
+    before = costs.predict(["Tree"], tree)[0, 0] / costs.rays_ms(tree)[0, 0]
     for _ in range(item_costs.COST_HALF_LIFE):
         costs.tick([True, False, False], [True, False, False])
-    after = costs.predict(["Tree"], tree, [1.0])[0, 0] / costs.rays_ms(tree)[0, 0]
+    after = costs.predict(["Tree"], tree)[0, 0] / costs.rays_ms(tree)[0, 0]
     assert after == pytest.approx(before ** 0.5, rel=1e-6)
 
 
@@ -358,7 +358,7 @@ def test_an_items_own_cost_is_against_the_current_fit_not_counted_twice():
     for rays in (180, 840, 400, 1600, 250, 1200, 3000, 600, 2000, 350):
         item_frame(costs, "Statue", rays)
     for rays in (300, 1000, 2500):
-        assert costs.predict(["Statue"], np.array([[float(rays), 0, 0]]), [1.0])[0, 0] == pytest.approx(
+        assert costs.predict(["Statue"], np.array([[float(rays), 0, 0]]))[0, 0] == pytest.approx(
             law(rays), rel=1e-6)
     assert costs.cost_ratios(["Statue"])[0, 0] == pytest.approx(1.0, rel=1e-6)
 
