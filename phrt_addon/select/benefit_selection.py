@@ -46,7 +46,7 @@ A guard on flips
     delayed (the budget comes first).
 Cost
     Per item from ``item_costs`` (its expected rays times its learned rays ratio times the
-    effect's learned ms per ray; Q = 1 is the measured cost, a designer's Q scales it), plus per
+    effect's learned ms; a designer's Q divides the item's value instead, never its ms), plus per
     effect a fixed part paid once if any of its items is traced (``knapsack.solve_grouped``);
     the trace stage's fixed overhead is charged once; the time left is reduced by the margin
     and planned to the aim of ``frame_time.FrameTime`` (the predictions' recent errors, the
@@ -168,8 +168,8 @@ class BenefitSelector:
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
                tiers: bool = False, fixed_ms=None, unmeasured=None, tier_costs=None, visible=None) -> ItemChoice:
-        """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,);
-        ``cost_ms`` each item's predicted ms at full rate (``item_costs``, Q included);
+        """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,, K / Q);
+        ``cost_ms`` each item's predicted ms at full rate (``item_costs``: the ms it takes);
         ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced;
         ``unmeasured`` (3,) bool, effects whose cost was never measured: one item of each (the
         most valuable per predicted ms) is the probe, the others wait for its measurement.
