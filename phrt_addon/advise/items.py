@@ -166,7 +166,7 @@ def books(measured, tagged, budgets_ms, shared_ms, selections=None, judged_frame
     """{item key: ItemBook} from the judged frames' ``FrameCandidates`` (names = item keys).
 
     ``tagged`` {key: bool} lists every item judged; ``budgets_ms`` {fraction: budget ms};
-    ``shared_ms`` {frame: the raster + composite ms every selection pays on that frame}: the oracle
+    ``shared_ms`` {frame: the raster + select + composite ms every selection pays on that frame}: the oracle
     at a budget fills ``oracle.nominal_time_left(budget, shared)``, as the sweep's oracle does; ``selections`` {name: {fraction: {key: share}}} from the
     replays (:func:`selection_shares`)."""
     measured = list(measured)

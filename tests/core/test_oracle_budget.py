@@ -8,14 +8,15 @@ from phrt.phrt_addon.report import oracle, rescore
 from phrt.phrt_addon.runs.run_log import RunLog
 
 
-def test_the_shared_part_is_the_raster_runs_raster_and_composite_its_first_frame_the_steady_median():
-    rows = [{"frame": 1, "raster_ms": 900.0, "composite_ms": 100.0},
-            {"frame": 2, "raster_ms": 30.0, "composite_ms": 10.0},
-            {"frame": 3, "raster_ms": 34.0, "composite_ms": None},
-            {"frame": 4, "raster_ms": 40.0, "composite_ms": 10.0}]
+def test_the_shared_part_is_the_raster_runs_raster_select_and_composite_its_first_frame_the_steady_median():
+    rows = [{"frame": 1, "raster_ms": 900.0, "composite_ms": 100.0, "select_ms": 80.0},
+            {"frame": 2, "raster_ms": 30.0, "composite_ms": 10.0, "select_ms": 1.0},
+            {"frame": 3, "raster_ms": 34.0, "composite_ms": None, "select_ms": 1.0},
+            {"frame": 4, "raster_ms": 40.0, "composite_ms": 10.0, "select_ms": 1.0},
+            {"frame": 5, "raster_ms": 40.0, "composite_ms": 10.0}]  # a row without select_ms: 0 for it
     shared = oracle.shared_ms(rows)
-    assert shared[2] == pytest.approx(40.0) and shared[4] == pytest.approx(50.0)
-    assert shared[1] == pytest.approx(45.0) and shared[3] == pytest.approx(45.0)
+    assert shared[2] == pytest.approx(41.0) and shared[4] == pytest.approx(51.0) and shared[5] == pytest.approx(50.0)
+    assert shared[1] == pytest.approx(50.0) and shared[3] == pytest.approx(50.0)
     assert oracle.nominal_time_left(120.0, 50.0) == pytest.approx(70.0)
     assert oracle.nominal_time_left(40.0, 50.0) == 0.0
 

@@ -161,7 +161,8 @@ def test_one_oracle_per_budget_fills_the_budgets_nominal_time_for_tracing(replay
     assert info["frames"] == [2, 4]
     rows = results.regret_rows
     assert {row["run"] for row in rows} == {"tight", "ample"} and len(rows) == 4
-    shared = {row["frame"]: row["raster_ms"] + row["composite_ms"] for row in run_files.read_frames(runs["raster"])}
+    shared = {row["frame"]: row["raster_ms"] + row["select_ms"] + row["composite_ms"]
+              for row in run_files.read_frames(runs["raster"])}
     for row in rows:
         budget = run_files.read_summary(runs[row["run"]])["budget_ms"]
         assert row["shared_ms"] == pytest.approx(shared[row["frame"]], rel=1e-5)
