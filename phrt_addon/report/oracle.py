@@ -21,13 +21,11 @@ On sampled frames (every ``k``-th frame of the runs, default 8) the oracle
    time for tracing (``capacity_ms``) is the budget's nominal time left on
    that frame, ``budget_ms - shared_ms``, where ``shared_ms`` is what every
    variant spends on that frame whatever it selects: the raster run's
-   ``raster_ms + select_ms + composite_ms`` on that frame (:func:`shared_ms`;
-   the median of its steady frames for its first frame, which holds one-time
-   work).  The raster run's selection (each element's pixels, the log's
-   terms) is work every mode does, and the budget's raster end counts it: a
-   budget at 0 of the way leaves the oracle no time (before 6 Dec 2026 it
-   left it that selection's 1-1.2 ms).  A variant's own bookkeeping beyond it
-   is part of what it costs; nor is a run's own T shared (``time_left_ms``, kept beside for
+   ``raster_ms + select_ms + composite_ms`` on that frame (:func:`shared_ms`; the
+   steady median for its first frame).  Every mode does that selection (each
+   element's pixels, the log's terms): at 0 of the way the oracle has no time.
+   A variant's own bookkeeping beyond it is part of what it costs; nor is a
+   run's own T shared (``time_left_ms``, kept beside for
    reading): a run that overran, or whose bookkeeping shrank T, is judged on
    the same scale as the others.  Within it, the subset of candidates with
    the largest summed benefit: an exact 0/1 knapsack on measured numbers
@@ -232,15 +230,13 @@ def trace_overhead_ms(alone_ms, together_ms) -> float:
 
 def shared_ms(raster_rows) -> dict:
     """{frame: ms every variant spends on it whatever it selects}: the raster run's ``raster_ms +
-    select_ms + composite_ms`` of each frame (a row without ``select_ms``, 0 for it); its first
-    frame (one-time work) and frames without the raster and composite ms get the median over its
-    steady frames."""
+    select_ms + composite_ms`` of each frame (no ``select_ms``: 0); its first frame (one-time
+    work) and frames without raster and composite ms get the median over its steady frames."""
     def both(row):
         values = [row.get("raster_ms"), row.get("composite_ms")]
-        if any(value is None or not np.isfinite(value) for value in values):
-            return None
         select = row.get("select_ms")
-        return float(sum(values)) + (float(select) if select is not None and np.isfinite(select) else 0.0)
+        return None if any(value is None or not np.isfinite(value) for value in values) else \
+            float(sum(values)) + (float(select) if select is not None and np.isfinite(select) else 0.0)
 
     rows = sorted(raster_rows, key=lambda row: int(row["frame"]))
     own = {int(row["frame"]): both(row) for row in steady.steady_rows(rows)}

@@ -81,19 +81,20 @@ def spread(samples, timed_setup: bool):
     return x, y, usable, apart
 
 
-def power_law(samples, timed_setup: bool) -> bool:
-    """Whether :func:`fit_window` fits the power law to this window (MIN_PAIRS pairs SPREAD apart)."""
-    return bool(len(samples) and np.count_nonzero(spread(samples, timed_setup)[3]) >= MIN_PAIRS)
-
-
 def fit_window(samples, timed_setup: bool, embree=None) -> tuple[float, float, float, float, float]:
-    """(fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
+    """:func:`fit_shape`'s fit alone."""
+    return fit_shape(samples, timed_setup, embree)[0]
+
+
+def fit_shape(samples, timed_setup: bool, embree=None) -> tuple[tuple[float, float, float, float, float], bool]:
+    """((fixed ms, scale, exponent, Embree's ms a ray, the largest item's rays) from a window of
     (rays, ms, setup ms, Embree ms, items): an item of r rays costs max(scale x r ** exponent,
     Embree's ms a ray x r), growing as r ** MIN_EXPONENT beyond the largest item measured.  The
     timed setup (shadows) is taken out first and is the fixed part (so a setup that grows with the
     casters is not counted twice).  ``embree``: (Embree's ms a ray, whether it is trusted), as
     ``ItemCosts`` settles it (an untrusted figure capped by the effect's last trusted one,
-    ``TRUSTED_RAYS``); None: :func:`embree_ms_a_ray` of the window."""
+    ``TRUSTED_RAYS``); None: :func:`embree_ms_a_ray` of the window), and whether the power law
+    was fitted (MIN_PAIRS pairs SPREAD apart; else the line)."""
     data = np.asarray(samples, np.float64)
     rays, ms, setup, inside, _ = data.T
     setup = setup if timed_setup else np.zeros_like(setup)
@@ -107,7 +108,7 @@ def fit_window(samples, timed_setup: bool, embree=None) -> tuple[float, float, f
         first, second = i[apart], j[apart]
         exponent = min(max(median(np.log(y[second] / y[first]) / np.log(x[second] / x[first])), MIN_EXPONENT), 1.0)
         scale = median(y[usable] / x[usable] ** exponent)
-        return median(setup), scale, exponent, embree, float(np.max(x[usable]))
+        return (median(setup), scale, exponent, embree, float(np.max(x[usable]))), True
     # Before a spread: linear, EMBREE_FACTOR x Embree's ms a ray, the rest of the frame's time a
     # fixed part paid once (its intercept); from an untrusted Embree figure, not beyond the largest
     # item measured.
@@ -116,5 +117,5 @@ def fit_window(samples, timed_setup: bool, embree=None) -> tuple[float, float, f
     if per_ray == 0.0:  # nothing measured inside Embree (a test double): every ms left per ray
         per_ray = median(np.maximum(rest - intercept, 0.0) / rays)
     if trusted or not np.any(usable):
-        return median(setup) + intercept, per_ray, 1.0, embree, np.inf
-    return median(setup) + intercept, per_ray, 1.0, 0.0, float(np.max(x[usable]))  # no floor from it
+        return (median(setup) + intercept, per_ray, 1.0, embree, np.inf), False
+    return (median(setup) + intercept, per_ray, 1.0, 0.0, float(np.max(x[usable]))), False  # no floor from it

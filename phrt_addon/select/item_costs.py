@@ -60,7 +60,7 @@ import numpy as np
 from ..finite import finite
 from ..schema import EFFECTS
 from .benefit_selection import TIER_COST, TIER_RATES
-from .cost_fit import embree_ms_a_ray, fit_window, item_ms, power_law
+from .cost_fit import embree_ms_a_ray, fit_shape, item_ms
 from .frame_time import median
 from .cost_model import MS_PER_RAY_PRIOR, STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES, UNMEASURED_MARGIN
 
@@ -259,8 +259,7 @@ class ItemCosts:
                     self.embree_known[j] = embree
                 elif not trusted and not np.isnan(self.embree_known[j]):  # capped by the last trusted one
                     embree, trusted = min(embree, float(self.embree_known[j])), True
-                self._fit[effect] = fit_window(window, effect == "shadows", (embree, trusted))
-                self.power[effect] = power_law(window, effect == "shadows")
+                self._fit[effect], self.power[effect] = fit_shape(window, effect == "shadows", (embree, trusted))
                 self._since_fit[effect] = 0
             self.learned.add(effect)
             measured = [v for (name, e), v in self.ratio.items() if e == effect]
