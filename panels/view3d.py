@@ -40,7 +40,7 @@ def _draw_element_settings(layout, settings):
     column = layout.column()
     column.active = settings.candidate
     column.prop(settings, "priority", text="Priority K")
-    column.prop(settings, "rt_cost", text="Cost Q (x measured)")
+    column.prop(settings, "rt_cost", text="Cost Q")
     effects = column.column(heading="Ray Trace", align=True)
     effects.prop(settings, "shadows")
     effects.prop(settings, "reflections")

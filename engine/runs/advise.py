@@ -3,7 +3,7 @@
 :func:`advice_steps` is a generator (one render or so per step, for the modal operator's progress
 and cancel); :func:`run_advice` runs it to the end.  In order, under ``OUT/runs/``:
 
-1. a RASTER replay of the frames (what every selection pays per frame: raster + composite ms,
+1. a RASTER replay of the frames (what every selection pays per frame: raster + select + composite ms,
    and which untagged objects are visible how much);
 2. RAYTRACE replays of the judged frames (every ``every``-th): the designer's tags (the ray traced
    frame time), then with the untagged objects judged as temporary candidates, with images: the

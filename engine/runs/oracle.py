@@ -85,7 +85,8 @@ class ForcedRenderer:
         ratio = clock.observe(gbuffer, gbuffer_of.get(frame))
         shared = shared_of.get(frame)
         if shared is None:  # no raster run's frame: the oracle's own, on the runs' clock
-            shared = (float(stats["raster_ms"]) + float(stats.get("composite_ms") or 0.0)) / ratio
+            shared = (float(stats["raster_ms"]) + float(stats.get("select_ms") or 0.0)
+                      + float(stats.get("composite_ms") or 0.0)) / ratio
         return RasterFrame(image=image, stats=stats, selection=selection, ratio=ratio,
                            flip=metrics.flip(reference, image), shared_ms=shared)
 

@@ -392,8 +392,8 @@ def write_results(folder, every, frames, candidates, regret_rows, run_dirs, note
         "min_benefit": MIN_BENEFIT, "note": note or
         "computed after the runs, outside every timed region: each candidate traced alone against the "
         f"reference (cost: the median of {TIMINGS} timings), one oracle per budget: an exact knapsack on measured "
-        "benefit and cost within the budget's nominal time for tracing (budget - the raster run's raster and "
-        "composite ms on that frame; shared_from names that run: in a lockstep sweep the raster run rendered "
+        "benefit and cost within the budget's nominal time for tracing (budget - the raster run's raster, select "
+        "and composite ms on that frame; shared_from names that run: in a lockstep sweep the raster run rendered "
         "with the hybrid runs), its timings divided by clock_ratio (the runs' clock), its subset rendered and "
         "measured, chosen again when its trace overran that time; unweighted by K"})
     atomic.write_text(folder / ORACLE_JSON, json.dumps(info, indent=2, allow_nan=False) + "\n")

@@ -27,7 +27,8 @@ oracle's subset for the same budget (``oracle/regret.csv``):
   ``benefit``): ``median_predicted_over_measured`` (the selection's predicted
   cost of its choice over the oracle's measured cost) and
   ``benefit_rank_correlation`` (Spearman, over every judged candidate: how well
-  the selection's benefit estimate orders what the oracle measured).
+  the selection's benefit estimate orders what the oracle measured; under
+  ``BENEFIT`` the estimate is weighted by K / Q, as the choice weighed it).
 
 Writes ``rescore.csv`` and ``rescore.md``.  Plain Python + numpy, no ``bpy``.
 """

@@ -9,7 +9,7 @@ Items
 Value
     Expected reduction of error: the pixels the effect changes (own pixels for reflections and
     refractions, the shadow footprint on receivers for shadows) x a per-pixel difference between
-    the traced and the raster image x K (the designer's priority) x the effect's LDR-FLIP per unit
+    the traced and the raster image x K / Q (the designer's weights) x the effect's LDR-FLIP per unit
     of change (``prior_scale.EFFECT_WEIGHT``).  The difference is learned on frames where the item
     was traced (the GPU measures it beside the image, ``item_benefit.measure``), pulled back to its
     prior by ``DECAY`` on each frame it is visible but not traced (the view changed), and before

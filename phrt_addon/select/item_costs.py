@@ -144,6 +144,7 @@ class ItemCosts:
             effect = EFFECTS[j]
             if effect in self.learned:  # measured once: its costs divided (never: the prior stays)
                 self.own = {key: value for key, value in self.own.items() if key[1] != effect}
+                self.power[effect] = False  # until a refit of new samples
                 fixed, scale, exponent, embree, largest = self._fit[effect]
                 self._fit[effect] = (fixed / STALE_DISCOUNT, scale / STALE_DISCOUNT, exponent,
                                      embree / STALE_DISCOUNT, largest)
@@ -178,29 +179,36 @@ class ItemCosts:
         out = np.ones((len(names), len(EFFECTS)))
         if self.own:
             row = {name: i for i, name in enumerate(names)}
-            low, high = COST_RATIO_RANGE
-            for (name, effect), (log_rays, log_ms, frame) in self.own.items():
-                i = row.get(name)
-                if i is None or not self.power[effect]:
-                    continue
-                priced = float(item_ms(self._fit[effect], np.array([math.exp(log_rays)]))[0])
-                if priced > 0:
-                    ratio = min(max(math.exp(log_ms) / priced, low), high)
-                    out[i, EFFECTS.index(effect)] = ratio ** (0.5 ** ((self.frames - frame) / COST_HALF_LIFE))
+            for j, effect in enumerate(EFFECTS):
+                entries = [(row[key[0]], value) for key, value in self.own.items()
+                           if key[1] == effect and key[0] in row] if self.power[effect] else []
+                if entries:
+                    rows = np.array([i for i, _ in entries])
+                    log_rays, log_ms, frame = (np.array(column, np.float64) for column in zip(*(v for _, v in entries)))
+                    out[rows, j] = self._corrections(effect, log_rays, log_ms, frame)
         return out
 
-    def predict(self, names, expected_rays) -> np.ndarray:
-        """(n, 3) ms of each item at full rate, its effect's fixed part not included."""
+    def _corrections(self, effect, log_rays, log_ms, frame) -> np.ndarray:
+        """Learned shares (EMAs of log rays and log ms, frame learned) over the current fit's price
+        of their rays, within COST_RATIO_RANGE, faded by their age (one ``item_ms`` call)."""
+        priced = item_ms(self._fit[effect], np.exp(log_rays))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.clip(np.where(priced > 0, np.exp(log_ms) / priced, 1.0), *COST_RATIO_RANGE)
+        return ratio ** (0.5 ** ((self.frames - frame) / COST_HALF_LIFE))
+
+    def predict(self, names, expected_rays, own=None) -> np.ndarray:
+        """(n, 3) ms of each item at full rate, its effect's fixed part not included (``own``: its
+        :meth:`cost_ratios`, if already computed this frame)."""
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
-        ms = self.rays_ms(rays) * self.cost_ratios(names)
+        ms = self.rays_ms(rays) * (self.cost_ratios(names) if own is None else own)
         return np.clip(finite(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
     def tier_costs(self, names, expected_rays, pixels) -> np.ndarray:
         """(n, 3, len(TIER_RATES)) ms of each item at each rate of ``TIER_RATES``."""
-        full = self.predict(names, expected_rays)
+        own = self.cost_ratios(names)
+        full = self.predict(names, expected_rays, own)
         out = np.empty(full.shape + (len(TIER_RATES),))
         pixels = finite(pixels, nan=0.0, posinf=0.0)
-        own = self.cost_ratios(names)
         rays = np.asarray(expected_rays, np.float64) * self.ratios(names)
         for j, effect in enumerate(EFFECTS):
             per_pixel = float(np.median(self.reconstruction[effect])) if self.reconstruction[effect] else None
@@ -268,9 +276,16 @@ class ItemCosts:
 
     def _learn_own(self, names, items, effect, rest_ms, item_rays) -> None:
         """The chosen ``items`` of ``effect`` share ``rest_ms`` (its ms beyond the timed setup) as
-        the fit prices their measured ``item_rays``; each learns its share and its rays."""
+        their current prices of their measured ``item_rays`` (the fit's, times each one's own
+        correction: two items traced together keep what each learned alone); each learns its
+        share and its rays."""
         rays = np.maximum(item_rays[items], 0.0)
-        priced = item_ms(self._fit[effect], rays)
+        known = [(k, self.own[(names[i], effect)]) for k, i in enumerate(items.tolist()) if (names[i], effect) in self.own]
+        own = np.ones(len(items))
+        if known:
+            own[[k for k, _ in known]] = self._corrections(effect, *(np.array(column, np.float64) for column in
+                                                                      zip(*(value for _, value in known))))
+        priced = item_ms(self._fit[effect], rays) * own
         total = float(np.sum(priced))
         if not (total > 0 and np.isfinite(total) and rest_ms > 0):
             return

@@ -352,24 +352,51 @@ def test_an_item_dearer_than_its_rays_learns_its_own_cost():
 
 
 def test_an_items_own_cost_is_against_the_current_fit_not_counted_twice():
-    """One caster traced alone, following the law exactly: whatever the fit said on its way there,
-    its own cost ends at the law, so the correction learned against early fits does not stay."""
+    """A statue's own cost is learned (the law); then 33 frames of a wall at 1.5x the law move the
+    fit to 1.5x.  The statue's price follows what it measured, faded towards the new fit by its
+    age, not the new fit times a ratio frozen when it was learned (which would say 1.5x)."""
     costs = ItemCosts()
     for rays in (180, 840, 400, 1600, 250, 1200, 3000, 600, 2000, 350):
         item_frame(costs, "Statue", rays)
-    for rays in (300, 1000, 2500):
-        assert costs.predict(["Statue"], np.array([[float(rays), 0, 0]]))[0, 0] == pytest.approx(
-            law(rays), rel=1e-6)
-    assert costs.cost_ratios(["Statue"])[0, 0] == pytest.approx(1.0, rel=1e-6)
+    assert costs.cost_ratios(["Statue"])[0, 0] == pytest.approx(1.0, rel=1e-6)  # the fit is the law
+    for rays in (180, 840, 400, 1600, 250, 1200, 3000, 600, 2000, 350) * 3 + (800, 900, 1000):
+        item_frame(costs, "Wall", rays, factor=1.5)
+    probe = np.array([[1000.0, 0, 0]])
+    assert costs.rays_ms(probe)[0, 0] == pytest.approx(1.5 * law(1000), rel=1e-6)
+    fade = 0.5 ** (33 / item_costs.COST_HALF_LIFE)
+    assert costs.predict(["Statue"], probe)[0, 0] == pytest.approx(1.5 * law(1000) * (1 / 1.5) ** fade, rel=0.02)
+    assert costs.predict(["Wall"], probe)[0, 0] == pytest.approx(1.5 * law(1000), rel=0.02)
 
 
 def test_an_items_own_cost_is_bounded_and_cleared_by_a_stale_revision():
     costs = ItemCosts()
     for rays in (180, 840, 400, 1600, 250, 1200):
         item_frame(costs, "Statue", rays)
-    for _ in range(10):  # a stalled frame after another: 50x the law
-        item_frame(costs, "Stalled", 5000, factor=50.0)
-    assert costs.cost_ratios(["Stalled"])[0, 0] <= item_costs.COST_RATIO_RANGE[1] + 1e-9
+    item_frame(costs, "Stalled", 5000, factor=50.0)  # one stalled frame: 50x the law
+    assert costs.cost_ratios(["Stalled"])[0, 0] == pytest.approx(item_costs.COST_RATIO_RANGE[1])
     for _ in range(int(costs.stale_after[0])):  # wanted, never traced: the effect's costs are revised
         costs.tick([True, False, False], [False, False, False])
     assert costs.cost_ratios(["Stalled"])[0, 0] == 1.0
+
+
+def test_items_traced_together_keep_what_each_learned_alone():
+    """A tree learned 1.5x the law alone, a wall 1x; traced together at their true costs, the frame's
+    ms are shared as their corrected prices: each keeps its own (split by the fit alone, both
+    would drift to the average)."""
+    costs = ItemCosts()
+    for rays in (180, 840, 400, 1600, 250, 1200, 15000, 25000, 18000, 22000):
+        item_frame(costs, "Statue" if rays < 10000 else "Wall", rays)
+    for _ in range(8):
+        item_frame(costs, "Tree", 20000, factor=1.5)
+        item_frame(costs, "Wall", 20000)
+    tree = costs.cost_ratios(["Tree"])[0, 0] * costs.rays_ms(np.array([[20000.0, 0, 0]]))[0, 0]
+    for _ in range(10):
+        expected = np.array([[20000.0, 0, 0], [20000.0, 0, 0]])
+        chosen = np.array([[True, False, False], [True, False, False]])
+        costs.tick([True, False, False], [True, False, False])
+        costs.observe(["Tree", "Wall"], expected, expected, chosen, chosen.astype(float),
+                      [3.0 + 2.5 * law(20000), 0, 0], [40000.0, 0, 0], shadow_setup_ms=3.0,
+                      embree_ms=[2e-4 * 40000, 0, 0])
+    own = costs.cost_ratios(["Tree", "Wall"])[:, 0] * costs.rays_ms(np.array([[20000.0, 0, 0]]))[0, 0]
+    assert own[0] == pytest.approx(1.5 * law(20000), rel=0.1) and own[1] == pytest.approx(law(20000), rel=0.1)
+    assert tree == pytest.approx(1.5 * law(20000), rel=0.12)
