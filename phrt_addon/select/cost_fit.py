@@ -41,6 +41,15 @@ def item_ms(fit, rays: np.ndarray) -> np.ndarray:
     return np.maximum(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays)
 
 
+def item_ms_one(fit, rays: float) -> float:
+    """:func:`item_ms` of one item (finite rays >= 0), in plain Python: the items' own costs price a
+    few entries a frame, where numpy's per-call work would cost more than the arithmetic."""
+    _, scale, exponent, embree, largest = fit
+    within = min(rays, largest)
+    beyond = rays / within if within > 0 else 1.0
+    return max(scale * within ** exponent * beyond ** MIN_EXPONENT, embree * rays)
+
+
 @lru_cache(maxsize=8)
 def pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     """The (i, j) index pairs i < j of a window of n samples (read-only, kept per n)."""

@@ -60,7 +60,7 @@ import numpy as np
 from ..finite import finite
 from ..schema import EFFECTS
 from .benefit_selection import TIER_COST, TIER_RATES
-from .cost_fit import embree_ms_a_ray, fit_shape, item_ms
+from .cost_fit import embree_ms_a_ray, fit_shape, item_ms, item_ms_one
 from .frame_time import median
 from .cost_model import MS_PER_RAY_PRIOR, STALE_DISCOUNT, STALE_FRAMES, STALE_MAX_FRAMES, UNMEASURED_MARGIN
 
@@ -179,21 +179,18 @@ class ItemCosts:
         out = np.ones((len(names), len(EFFECTS)))
         if self.own:
             row = {name: i for i, name in enumerate(names)}
-            for j, effect in enumerate(EFFECTS):
-                entries = [(row[key[0]], value) for key, value in self.own.items()
-                           if key[1] == effect and key[0] in row] if self.power[effect] else []
-                if entries:
-                    rows = np.array([i for i, _ in entries])
-                    log_rays, log_ms, frame = (np.array(column, np.float64) for column in zip(*(v for _, v in entries)))
-                    out[rows, j] = self._corrections(effect, log_rays, log_ms, frame)
+            for (name, effect), learned in self.own.items():
+                i = row.get(name)
+                if i is not None and self.power[effect]:
+                    out[i, EFFECTS.index(effect)] = self._correction(effect, *learned)
         return out
 
-    def _corrections(self, effect, log_rays, log_ms, frame) -> np.ndarray:
-        """Learned shares (EMAs of log rays and log ms, frame learned) over the current fit's price
-        of their rays, within COST_RATIO_RANGE, faded by their age (one ``item_ms`` call)."""
-        priced = item_ms(self._fit[effect], np.exp(log_rays))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.clip(np.where(priced > 0, np.exp(log_ms) / priced, 1.0), *COST_RATIO_RANGE)
+    def _correction(self, effect, log_rays, log_ms, frame) -> float:
+        """A learned share (EMAs of log rays and log ms, the frame learned) over the current fit's
+        price of its rays, within COST_RATIO_RANGE, faded by its age."""
+        priced = item_ms_one(self._fit[effect], math.exp(log_rays))
+        low, high = COST_RATIO_RANGE
+        ratio = min(max(math.exp(log_ms) / priced, low), high) if priced > 0 else 1.0
         return ratio ** (0.5 ** ((self.frames - frame) / COST_HALF_LIFE))
 
     def predict(self, names, expected_rays, own=None) -> np.ndarray:
@@ -279,20 +276,17 @@ class ItemCosts:
         their current prices of their measured ``item_rays`` (the fit's, times each one's own
         correction: two items traced together keep what each learned alone); each learns its
         share and its rays."""
-        rays = np.maximum(item_rays[items], 0.0)
-        known = [(k, self.own[(names[i], effect)]) for k, i in enumerate(items.tolist()) if (names[i], effect) in self.own]
-        own = np.ones(len(items))
-        if known:
-            own[[k for k, _ in known]] = self._corrections(effect, *(np.array(column, np.float64) for column in
-                                                                      zip(*(value for _, value in known))))
-        priced = item_ms(self._fit[effect], rays) * own
-        total = float(np.sum(priced))
-        if not (total > 0 and np.isfinite(total) and rest_ms > 0):
+        fit, keys = self._fit[effect], [(names[i], effect) for i in items.tolist()]
+        rays = [max(float(value), 0.0) for value in item_rays[items].tolist()]
+        priced = [item_ms_one(fit, r) * (self._correction(effect, *self.own[key]) if key in self.own else 1.0)
+                  for key, r in zip(keys, rays)]
+        total = sum(priced)
+        if not (total > 0 and math.isfinite(total) and rest_ms > 0):
             return
-        for i, item_rays_now, share in zip(items.tolist(), rays.tolist(), (priced * (rest_ms / total)).tolist()):
+        for key, item_rays_now, price in zip(keys, rays, priced):
+            share = price * rest_ms / total
             if item_rays_now <= 0 or share <= 0:
                 continue
-            key = (names[i], effect)
             now = (math.log(item_rays_now), math.log(share))
             old = self.own.get(key)
             if old is not None:

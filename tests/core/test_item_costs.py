@@ -400,3 +400,12 @@ def test_items_traced_together_keep_what_each_learned_alone():
     own = costs.cost_ratios(["Tree", "Wall"])[:, 0] * costs.rays_ms(np.array([[20000.0, 0, 0]]))[0, 0]
     assert own[0] == pytest.approx(1.5 * law(20000), rel=0.1) and own[1] == pytest.approx(law(20000), rel=0.1)
     assert tree == pytest.approx(1.5 * law(20000), rel=0.12)
+
+
+def test_one_items_price_in_plain_python_is_the_arrays_price():
+    rng = np.random.default_rng(3)
+    fits = [(1.0, 0.05, 0.6, 2e-4, 5000.0), (0.0, 3e-4, 1.0, 1e-4, np.inf), (2.0, 0.01, 0.8, 0.0, 800.0)]
+    rays = np.r_[0.0, 1.0, rng.uniform(0, 40000, 50)]
+    for fit in fits:
+        assert [cost_fit.item_ms_one(fit, r) for r in rays.tolist()] == pytest.approx(
+            cost_fit.item_ms(fit, rays).tolist(), rel=1e-12)
