@@ -34,7 +34,8 @@ item predicted too dear is never traced, so never measured again.  Here, per eff
   over ``WINDOW`` frames follows a new item only once it holds half the window (atrium path2's
   young tree, traced alone for 30 frames: 5-7 ms a frame over its price).  Once the power law is
   fitted, a traced frame's ms of an effect beyond its timed setup is shared among its chosen
-  items as the fit prices their measured rays, and each item keeps an EMA (``COST_SMOOTHING``)
+  items as their current prices of their measured rays (the fit's times each one's correction, so
+  items traced together keep what each learned alone), and each keeps an EMA (``COST_SMOOTHING``)
   of the log of its share and of its rays.  Its correction is that share over what the current
   fit prices those rays at (so a refit that learns the same thing does not count it twice),
   within ``COST_RATIO_RANGE``, fading towards 1 by half every ``COST_HALF_LIFE`` frames it is
