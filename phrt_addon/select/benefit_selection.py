@@ -168,7 +168,7 @@ class BenefitSelector:
 
     def choose(self, names, eligible, pixels, priors, priority, cost_ms, time_left_ms, overhead_ms,
                tiers: bool = False, fixed_ms=None, unmeasured=None, tier_costs=None, visible=None) -> ItemChoice:
-        """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,, K / Q);
+        """This frame's items.  Arrays (n, 3) in ``EFFECTS`` order except ``priority`` (n,): K / Q;
         ``cost_ms`` each item's predicted ms at full rate (``item_costs``: the ms it takes);
         ``fixed_ms`` (3,) per effect the ms paid once if any of its items is traced;
         ``unmeasured`` (3,) bool, effects whose cost was never measured: one item of each (the
