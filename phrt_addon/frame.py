@@ -331,7 +331,8 @@ class FrameRenderer:
         competing = terms.candidate & terms.visible & terms.within_area
         eligible = flags & competing[:, None] & (pixels > 0)
         overhead = self.cost_model.trace_overhead_ms()
-        cost_ms = self.item_costs.predict(frame_elements.names, expected_rays(frame_elements.area_px, effect_rays))
+        rays, own = expected_rays(frame_elements.area_px, effect_rays), self.item_costs.cost_ratios(frame_elements.names)
+        cost_ms = self.item_costs.predict(frame_elements.names, rays, own)
         time_left = self.benefit_selector.aimed_time_left(selection.time_left_ms, selection.budget_ms)
         # Q weighs the choice (value per ms / Q); the frame is planned with the ms items take.
         choice = self.benefit_selector.choose(frame_elements.names, eligible, pixels, priors, frame_elements.priority
@@ -341,8 +342,7 @@ class FrameRenderer:
                                               unmeasured=self.item_costs.unmeasured(),
                                               visible=terms.visible,
                                               tier_costs=self.item_costs.tier_costs(
-                                                  frame_elements.names, expected_rays(frame_elements.area_px, effect_rays),
-                                                  pixels) if tiers else None)
+                                                  frame_elements.names, rays, pixels, own) if tiers else None)
         chosen = choice.chosen
         selected = chosen.any(axis=1)
         forced = heuristic.force_selection(selection, [name for name, flag in zip(frame_elements.names, selected)

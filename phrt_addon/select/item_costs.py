@@ -201,9 +201,10 @@ class ItemCosts:
         ms = self.rays_ms(rays) * (self.cost_ratios(names) if own is None else own)
         return np.clip(finite(ms, nan=MAX_MS, posinf=MAX_MS, neginf=0.0), 0.0, MAX_MS)
 
-    def tier_costs(self, names, expected_rays, pixels) -> np.ndarray:
-        """(n, 3, len(TIER_RATES)) ms of each item at each rate of ``TIER_RATES``."""
-        own = self.cost_ratios(names)
+    def tier_costs(self, names, expected_rays, pixels, own=None) -> np.ndarray:
+        """(n, 3, len(TIER_RATES)) ms of each item at each rate of ``TIER_RATES`` (``own`` as for
+        :meth:`predict`)."""
+        own = self.cost_ratios(names) if own is None else own
         full = self.predict(names, expected_rays, own)
         out = np.empty(full.shape + (len(TIER_RATES),))
         pixels = finite(pixels, nan=0.0, posinf=0.0)
